@@ -1,0 +1,36 @@
+# robotadapt: every target sets up its own .venv with the machine's python3.
+PY      ?= python3
+VENV    := .venv
+BIN     := $(VENV)/bin
+PIP     := $(BIN)/python -m pip
+STAMP   := $(VENV)/.stamp
+
+.PHONY: demo test test-all bench lint clean
+
+$(BIN)/python:
+	$(PY) -m venv $(VENV)
+	$(PIP) install --quiet --upgrade pip
+
+$(VENV)/.core: $(BIN)/python pyproject.toml
+	$(PIP) install --quiet -e .
+	touch $@
+
+$(VENV)/.dev: $(BIN)/python pyproject.toml
+	$(PIP) install --quiet -e ".[dev,symbolic,urdf,dist]"
+	touch $@
+
+demo: $(VENV)/.core                ## set up and run the flagship example (Example 6.3.1) into results/
+	$(BIN)/robotadapt run example-6.3.1 --out results/example-6.3.1
+
+test: $(VENV)/.dev                 ## set up and run the fast test suite
+	$(BIN)/ruff check src tests
+	$(BIN)/python -m pytest -q -n 2 -m "not slow"
+
+test-all: $(VENV)/.dev             ## every test, the slow studies included
+	$(BIN)/python -m pytest -q -n 2
+
+bench: $(VENV)/.dev                ## speed studies, ratios against a naive baseline
+	$(BIN)/python benchmarks/run_all.py
+
+clean:
+	rm -rf $(VENV) results build src/*.egg-info

@@ -1,0 +1,7 @@
+"""Controllers: `tau, dx = ctrl(t, x, q, dq, ref)`, pure, batch-capable, gains validated at construction."""
+
+from .base import Controller, HasFilteredError, HasLyapunov
+from .baseline import PD, ComputedTorque, PDGravity
+from .inertia_related import InertiaRelated
+
+__all__ = ["PD", "ComputedTorque", "Controller", "HasFilteredError", "HasLyapunov", "InertiaRelated", "PDGravity"]

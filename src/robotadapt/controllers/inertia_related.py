@@ -1,0 +1,73 @@
+"""Adaptive inertia-related controller of Slotine & Li (spec §3, Table 6.3.1)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+from .._array import matvec
+from ..robots.base import RobotModel
+from ..trajectories import Reference
+from .base import Array, errors, estimate, gains, inverse, quad
+
+
+@dataclass(frozen=True, eq=False)
+class InertiaRelated:
+    """Slotine–Li: the adaptive inertia-related controller (Table 6.3.1).
+
+    r = ė + Λe                                         (6.3.8)
+    τ = Y(q, q̇, q̇_d + Λe, q̈_d + Λė) φ̂ + K_v r       (6.3.11), (6.3.14)
+    dφ̂/dt = Γ Yᵀ r                                    (6.3.16)
+    V = ½ rᵀ M(q) r + ½ φ̃ᵀ Γ⁻¹ φ̃,  dV/dt = −rᵀ K_v r  (6.3.7), (6.3.17)
+
+    No joint acceleration and no inverse of M̂ are needed. State x = φ̂. Gains: a scalar (k·I), a list (diagonal) or a
+    symmetric positive definite matrix.
+    """
+
+    model: RobotModel
+    Lam: Any
+    Kv: Any
+    Gamma: Any
+    phi_hat0: Any
+
+    def __post_init__(self) -> None:
+        gains(self, ("Lam", "Kv"), self.model.n)
+        gains(self, ("Gamma",), self.model.p)
+        estimate(self)
+
+    @cached_property
+    def _Gamma_inv(self) -> Array:
+        return inverse(self.Gamma)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(f"{name}_hat" for name in self.model.param_names)
+
+    def initial_state(self) -> Array:
+        return self.phi_hat0.copy()
+
+    def phi_hat(self, x: Array) -> Array:
+        return x
+
+    def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        e, de = errors(q, dq, ref)
+        return de + e @ self.Lam.T
+
+    def regressor(self, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+        """(Y, r) with the Slotine–Li reference velocity q̇_d + Λe and acceleration q̈_d + Λė (6.3.11)."""
+        e, de = errors(q, dq, ref)
+        r = de + e @ self.Lam.T
+        return self.model.regressor(q, dq, ref.dq_des + e @ self.Lam.T, ref.ddq_des + de @ self.Lam.T), r
+
+    def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+        Y, r = self.regressor(q, dq, ref)
+        tau = matvec(Y, x) + r @ self.Kv.T
+        dx = matvec(Y.mT, r) @ self.Gamma.T
+        return tau, dx
+
+    def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
+        """V of (6.3.7) with the true φ."""
+        r = self.filtered_error(t, x, q, dq, ref)
+        M = self.model.mass_matrix(q, phi)
+        return 0.5 * (r * matvec(M, r)).sum(axis=-1) + 0.5 * quad(phi - x, self._Gamma_inv)

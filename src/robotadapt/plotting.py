@@ -1,0 +1,62 @@
+"""Book-style figures of a run: tracking error, parameter estimates against the truth, torques (one PNG each)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from .result import atomic_write  # noqa: E402
+
+if TYPE_CHECKING:
+    from .result import SimulationResult
+
+
+def _finish(fig: Any, ax: Any, title: str, path: Path) -> Path:
+    ax.set_title(title)
+    ax.set_xlabel("t (s)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    fig.tight_layout()
+    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
+    plt.close(fig)
+    return path
+
+
+def tracking_error(res: SimulationResult, path: Path, title: str = "") -> Path:
+    """e_i(t) = q_des,i − q_i for every joint."""
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for i in range(res.e.shape[-1]):
+        ax.plot(res.t, res.e[:, i], label=f"e{i + 1}")
+    ax.set_ylabel("tracking error (rad or m)")
+    return _finish(fig, ax, f"{title} — tracking error".strip(" —"), path)
+
+
+def parameters(res: SimulationResult, path: Path, title: str = "") -> Path:
+    """φ̂(t), solid, with the true φ dashed in the same colour when known."""
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for i, name in enumerate(res.param_names):
+        (line,) = ax.plot(res.t, res.phi_hat[:, i], label=f"{name} estimate")
+        if res.phi is not None:
+            ax.axhline(res.phi[i], color=line.get_color(), linestyle="--", label=f"{name} true")
+    ax.set_ylabel("parameter")
+    return _finish(fig, ax, f"{title} — parameter estimates".strip(" —"), path)
+
+
+def torques(res: SimulationResult, path: Path, title: str = "") -> Path:
+    """Controller output τ_i(t)."""
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for i in range(res.tau.shape[-1]):
+        ax.plot(res.t, res.tau[:, i], label=f"tau{i + 1}")
+    ax.set_ylabel("torque (N·m) or force (N)")
+    return _finish(fig, ax, f"{title} — control input".strip(" —"), path)
+
+
+def save_figures(res: SimulationResult, directory: Path, title: str = "") -> list[Path]:
+    return [tracking_error(res, directory / "tracking_error.png", title),
+            parameters(res, directory / "parameters.png", title),
+            torques(res, directory / "torques.png", title)]

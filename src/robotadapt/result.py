@@ -1,0 +1,118 @@
+"""The record of one closed-loop run: time-major arrays, named views, status, metrics, files and figures."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from .validation import ConfigError
+
+Array = np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """Arrays are time-major: `q[k]` is the joint position at `t[k]`; `x` is the controller state, `phi_hat` the
+    estimate it holds, `V` the controller's Lyapunov function (None where the theory defines none), `r` its filtered
+    error. `phi` is the true parameter vector when the controller's model matches the plant's, else None.
+    `status` is ``"ok"`` or ``"diverged at t=… s: reason"``."""
+
+    t: Array
+    q: Array
+    dq: Array
+    x: Array
+    q_des: Array
+    dq_des: Array
+    ddq_des: Array
+    tau: Array
+    V: Array | None
+    r: Array | None
+    phi_hat: Array
+    phi: Array | None
+    param_names: tuple[str, ...]
+    state_names: tuple[str, ...]
+    status: str
+    wall_time: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def e(self) -> Array:
+        """Tracking error e = q_des − q."""
+        return self.q_des - self.q
+
+    @property
+    def de(self) -> Array:
+        """Velocity error ė = q̇_des − q̇."""
+        return self.dq_des - self.dq
+
+    @property
+    def phi_err(self) -> Array | None:
+        """φ̃ = φ − φ̂ when the truth is known."""
+        return None if self.phi is None else self.phi - self.phi_hat
+
+    def metrics(self) -> dict[str, Any]:
+        """Tracking, torque, parameter and Lyapunov metrics (see :func:`robotadapt.analysis.metrics`)."""
+        from .analysis import metrics
+
+        return metrics(self)
+
+    def arrays(self) -> dict[str, Array]:
+        """Every array of the run by name (what `save` writes to result.npz)."""
+        out = {name: getattr(self, name) for name in ("t", "q", "dq", "q_des", "dq_des", "ddq_des", "tau", "x",
+                                                         "phi_hat", "e", "de")}
+        out["V"] = np.full(self.t.shape, np.nan) if self.V is None else self.V
+        if self.r is not None:
+            out["r"] = self.r
+        if self.phi is not None:
+            out["phi"] = self.phi
+        return out
+
+    def save(self, directory: str | os.PathLike[str], scenario_text: str | None = None) -> Path:
+        """Write `result.npz`, `metrics.json` and (if given) `scenario.toml` into `directory`, each atomically."""
+        out = _writable(directory)
+        atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **self.arrays()), binary=True)
+        atomic_write(out / "metrics.json", lambda f: json.dump(self.metrics(), f, indent=2))
+        if scenario_text is not None:
+            atomic_write(out / "scenario.toml", lambda f: f.write(scenario_text))
+        return out
+
+    def plot(self, directory: str | os.PathLike[str], title: str = "") -> list[Path]:
+        """Write `tracking_error.png`, `parameters.png` and `torques.png` into `directory`."""
+        from .plotting import save_figures
+
+        return save_figures(self, _writable(directory), title)
+
+
+def _writable(directory: str | os.PathLike[str]) -> Path:
+    out = Path(directory)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError("--out", f"cannot create output folder {str(out)!r}: {exc.strerror}") from None
+    if not os.access(out, os.W_OK):
+        raise ConfigError("--out", f"output folder {str(out)!r} is not writable")
+    return out
+
+
+def atomic_write(path: Path, write: Callable[[IO[Any]], Any], binary: bool = False) -> None:
+    """Write through a temporary file in the same folder, then rename: never a truncated file."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb" if binary else "w") as f:
+            write(f)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+

@@ -1,0 +1,75 @@
+"""The robot-model contract: rigid-body dynamics linear in a parameter vector φ (spec §1).
+
+    τ = M(q) q̈ + V_m(q, q̇) q̇ + G(q) + F(q̇)                       (6.2.1)
+    M(q) a + V_m(q, q̇) v + G(q) + F(q̇) = Y(q, q̇, v, a) φ          (P3, the "two-slot" regressor)
+
+Every method accepts leading batch axes: `q, dq, v, a` have shape `(..., n)`, `phi` `(..., p)` (or `(p,)`), and outputs
+carry exactly the broadcast leading axes. Models are pure: the parameters are arguments, never state.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any
+
+from .._array import array_namespace, matvec
+
+Array = Any
+
+
+class RobotModel(ABC):
+    """Abstract rigid manipulator. Subclasses give the closed forms; the dynamics below are shared."""
+
+    @property
+    @abstractmethod
+    def n(self) -> int:
+        """Number of joints."""
+
+    @property
+    @abstractmethod
+    def param_names(self) -> tuple[str, ...]:
+        """Names of the entries of φ, in order."""
+
+    @property
+    def p(self) -> int:
+        """Number of parameters, `len(param_names)`."""
+        return len(self.param_names)
+
+    @abstractmethod
+    def mass_matrix(self, q: Array, phi: Array) -> Array:
+        """M(q), symmetric positive definite, shape `(..., n, n)` (property P1)."""
+
+    @abstractmethod
+    def coriolis_matrix(self, q: Array, dq: Array, phi: Array) -> Array:
+        """V_m(q, q̇) in Christoffel form, so that Ṁ − 2V_m is skew-symmetric (property P2), shape `(..., n, n)`."""
+
+    @abstractmethod
+    def gravity(self, q: Array, phi: Array) -> Array:
+        """G(q), shape `(..., n)`."""
+
+    @abstractmethod
+    def friction(self, dq: Array, phi: Array) -> Array:
+        """F(q̇), shape `(..., n)`."""
+
+    @abstractmethod
+    def regressor(self, q: Array, dq: Array, v: Array, a: Array) -> Array:
+        """Y(q, q̇, v, a) of shape `(..., n, p)` with `Y φ = M(q) a + V_m(q, q̇) v + G(q) + F(q̇)` (P3)."""
+
+    @abstractmethod
+    def remainder_regressor(self, q: Array, dq: Array) -> Array:
+        """Y_g(q, q̇) with `Y_g φ = −Ṁ q̇ + V_m q̇ + G + F = −V_mᵀ q̇ + G + F` (6.6.4), for torque filtering."""
+
+    def momentum_regressor(self, q: Array, dq: Array) -> Array:
+        """Y_h(q, q̇) with `Y_h φ = M(q) q̇` (6.6.3): the a-slot of Y with gravity and friction cancelled."""
+        zero = 0.0 * dq
+        return self.regressor(q, zero, zero, dq) - self.regressor(q, zero, zero, zero)
+
+    def inverse_dynamics(self, q: Array, dq: Array, ddq: Array, phi: Array) -> Array:
+        """τ = M q̈ + V_m q̇ + G + F (6.2.1), through the regressor."""
+        return matvec(self.regressor(q, dq, dq, ddq), phi)
+
+    def forward_dynamics(self, q: Array, dq: Array, tau: Array, phi: Array) -> Array:
+        """q̈ = M(q)⁻¹ (τ − V_m q̇ − G − F)."""
+        xp = array_namespace(q, dq, tau)
+        bias = matvec(self.regressor(q, dq, dq, 0.0 * dq), phi)
+        return xp.linalg.solve(self.mass_matrix(q, phi), (tau - bias)[..., None])[..., 0]

@@ -1,0 +1,156 @@
+"""From a scenario's sections to library objects: robot, plant, trajectory, controller, integrator.
+
+Each `kind` maps to a constructor; the keys a section may hold are the constructor's own parameter names, so an unknown
+key is an error that lists the known ones, and a missing required key names itself.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass, fields, is_dataclass
+from typing import Any
+
+import numpy as np
+
+from .. import controllers, trajectories
+from ..plant import Plant, sinusoidal_disturbance
+from ..robots import OneLinkArm, PolarArm, RobotModel, TwoLinkArm
+from ..simulation import RK4, SolveIVP
+from ..validation import ConfigError, as_scalar, as_vector, check_names
+
+ROBOTS: dict[str, Callable[..., RobotModel]] = {"one_link": OneLinkArm, "two_link": TwoLinkArm, "polar": PolarArm}
+TRAJECTORIES: dict[str, Callable[..., Any]] = {
+    "sinusoid": trajectories.sinusoid,
+    "sum_of_sines": trajectories.SumOfSines.make,
+    "exponential_step": trajectories.exponential_step,
+    "quintic": trajectories.quintic,
+    "constant": trajectories.constant,
+}
+CONTROLLERS: dict[str, Callable[..., Any]] = {
+    "slotine_li": controllers.InertiaRelated,
+    "computed_torque": controllers.ComputedTorque,
+    "pd": controllers.PD,
+    "pd_gravity": controllers.PDGravity,
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Setup:
+    """Everything `simulate` needs, built from a scenario."""
+
+    plant: Plant
+    controller: Any
+    trajectory: Any
+    t_final: float
+    integrator: RK4 | SolveIVP
+    q0: np.ndarray
+    dq0: np.ndarray
+    log_every: int
+    max_state: float
+
+
+def _params(ctor: Callable[..., Any], skip: tuple[str, ...]) -> dict[str, bool]:
+    """The constructor's keyword names → whether each is required."""
+    if is_dataclass(ctor):
+        return {f.name: f.default is MISSING and f.default_factory is MISSING for f in fields(ctor) if f.name not in skip}
+    sig = inspect.signature(ctor)
+    return {k: p.default is inspect.Parameter.empty for k, p in sig.parameters.items() if k not in skip}
+
+
+def _kind(section: dict[str, Any], table: dict[str, Callable[..., Any]], name: str,
+          skip: tuple[str, ...], defaults: dict[str, Any] | None = None) -> Any:
+    """Call the constructor that `section['kind']` names with the section's other keys."""
+    if not isinstance(section, dict):
+        raise ConfigError(name, f"expected a table of settings, got {section!r}")
+    kind = section.get("kind")
+    if not isinstance(kind, str) or kind not in table:
+        raise ConfigError(f"{name}.kind", f"expected one of {', '.join(sorted(table))}; got {kind!r}")
+    ctor = table[kind]
+    params = _params(ctor, skip)
+    keys = {k: v for k, v in section.items() if k != "kind"}
+    check_names(list(keys), list(params), name)
+    for key, value in (defaults or {}).items():
+        if key in params:
+            keys.setdefault(key, value)
+    for key, required in params.items():
+        if required and key not in keys:
+            raise ConfigError(f"{name}.{key}", f"missing; kind {kind!r} takes {', '.join(params)}")
+    return ctor, keys
+
+
+def robot(section: dict[str, Any]) -> RobotModel:
+    ctor, keys = _kind(section, ROBOTS, "robot", ())
+    for key, value in keys.items():
+        if isinstance(value, bool):
+            continue
+        if key in ("stiffness", "friction_terms"):
+            raise ConfigError(f"robot.{key}", f"expected true or false, got {value!r}")
+        keys[key] = as_scalar(value, f"robot.{key}", positive=True)
+    return ctor(**keys)
+
+
+def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray, np.ndarray]:
+    if not isinstance(section, dict):
+        raise ConfigError("plant", "expected a table with phi, q0, dq0 and optionally disturbance")
+    check_names(list(section), ["phi", "q0", "dq0", "disturbance"], "plant")
+    if "phi" not in section:
+        raise ConfigError("plant.phi", f"missing: the true parameters {', '.join(model.param_names)}")
+    dist = section.get("disturbance")
+    if dist is not None:
+        if not isinstance(dist, dict):
+            raise ConfigError("plant.disturbance", "expected a table with amplitude, omega, phase, bias")
+        check_names(list(dist), ["amplitude", "omega", "phase", "bias"], "plant.disturbance")
+        dist = sinusoidal_disturbance(model.n, **dist)
+    phi = as_vector(section["phi"], model.p, "plant.phi", broadcast=False)
+    q0 = as_vector(section.get("q0", 0.0), model.n, "plant.q0")
+    dq0 = as_vector(section.get("dq0", 0.0), model.n, "plant.dq0")
+    return Plant(model, phi, dist), q0, dq0
+
+
+def trajectory(section: dict[str, Any], model: RobotModel) -> Any:
+    ctor, keys = _kind(section, TRAJECTORIES, "trajectory", ("n", "cls"))
+    return ctor(model.n, **keys)
+
+
+def controller(section: dict[str, Any], model: RobotModel) -> Any:
+    ctor, keys = _kind(section, CONTROLLERS, "controller", ("model",), {"phi_hat0": np.zeros(model.p)})
+    return ctor(model, **keys)
+
+
+def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP, int, float]:
+    if not isinstance(section, dict):
+        raise ConfigError("simulation", "expected a table with t_final, dt, method")
+    check_names(list(section), ["t_final", "dt", "method", "rtol", "atol", "log_every", "max_state"], "simulation")
+    if "t_final" not in section:
+        raise ConfigError("simulation.t_final", "missing: the simulated time in seconds")
+    t_final = as_scalar(section["t_final"], "simulation.t_final", positive=True)
+    dt = as_scalar(section.get("dt", 1e-3), "simulation.dt", positive=True)
+    if dt > t_final:
+        raise ConfigError("simulation.dt", f"the step {dt:g} s is longer than t_final = {t_final:g} s")
+    method = section.get("method", "rk4")
+    if not isinstance(method, str):
+        raise ConfigError("simulation.method", f"expected a name such as 'rk4' or 'RK45', got {method!r}")
+    if method.lower() == "rk4":
+        if "rtol" in section or "atol" in section:
+            raise ConfigError("simulation.rtol", "tolerances apply to solve_ivp methods, not to the fixed-step 'rk4'")
+        integ: RK4 | SolveIVP = RK4(dt)
+    else:
+        integ = SolveIVP(method, section.get("rtol", 1e-8), section.get("atol", 1e-10), dt)
+    log_every = section.get("log_every", 1)
+    if isinstance(log_every, bool) or not isinstance(log_every, int) or log_every < 1:
+        raise ConfigError("simulation.log_every", f"expected a positive whole number, got {log_every!r}")
+    max_state = as_scalar(section.get("max_state", 1e6), "simulation.max_state", positive=True)
+    return t_final, integ, log_every, max_state
+
+
+def setup(data: dict[str, Any]) -> Setup:
+    """Build every object of a scenario (already parsed TOML), validating each field once."""
+    for name in ("robot", "plant", "trajectory", "controller", "simulation"):
+        if name not in data:
+            raise ConfigError(name, f"missing section [{name}]")
+    model = robot(data["robot"])
+    the_plant, q0, dq0 = plant(data["plant"], model)
+    t_final, integ, log_every, max_state = simulation(data["simulation"])
+    return Setup(the_plant, controller(data["controller"], model), trajectory(data["trajectory"], model), t_final,
+                 integ, q0, dq0, log_every, max_state)

@@ -1,0 +1,131 @@
+"""Scenario files: reading, `--set` overrides, the packaged catalogue (DESIGN "Scenarios").
+
+A scenario is a TOML file with a one-line `description` and the sections `[robot]`, `[plant]`, `[trajectory]`,
+`[controller]` and `[simulation]`. The book's examples ship inside the package; `robotadapt list` shows them.
+"""
+
+from __future__ import annotations
+
+import difflib
+import sys
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from ..validation import ConfigError
+from .build import Setup, setup
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+SECTIONS = ("robot", "plant", "trajectory", "controller", "simulation")
+TOP_KEYS = ("description", "notes")
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A parsed, validated scenario: `data` is the TOML content after overrides, `setup` the objects built from it."""
+
+    name: str
+    data: dict[str, Any]
+    setup: Setup
+
+    @property
+    def description(self) -> str:
+        return str(self.data.get("description", ""))
+
+    @property
+    def text(self) -> str:
+        """The resolved scenario as TOML (what a run saves as scenario.toml)."""
+        return tomli_w.dumps(self.data)
+
+    def run(self, progress: bool = False) -> Any:
+        """Simulate this scenario; returns a :class:`~robotadapt.result.SimulationResult`."""
+        from ..simulation import simulate
+
+        s = self.setup
+        return simulate(s.plant, s.controller, s.trajectory, t_final=s.t_final, integrator=s.integrator, q0=s.q0,
+                        dq0=s.dq0, log_every=s.log_every, max_state=s.max_state, progress=progress,
+                        info={"scenario": self.name, "description": self.description})
+
+
+def _packaged() -> dict[str, Any]:
+    folder = resources.files(__package__)
+    return {p.name[: -len(".toml")]: p for p in folder.iterdir() if p.name.endswith(".toml")}
+
+
+def available() -> dict[str, str]:
+    """Packaged scenario names → one-line descriptions, sorted by name."""
+    out = {}
+    for name, path in sorted(_packaged().items()):
+        out[name] = str(tomllib.loads(path.read_text(encoding="utf-8")).get("description", ""))
+    return out
+
+
+def parse(text: str, origin: str) -> dict[str, Any]:
+    """Parse TOML text into a dict, or a ConfigError naming `origin`."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("scenario", f"{origin} is not valid TOML: {exc}") from None
+    for key in data:
+        if key not in SECTIONS + TOP_KEYS:
+            raise ConfigError(key, f"unknown section or key in {origin}; a scenario has {', '.join(SECTIONS + TOP_KEYS)}")
+    return data
+
+
+def read(name_or_path: str | Path) -> tuple[str, dict[str, Any]]:
+    """Find a scenario by packaged name or file path and parse it."""
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise ConfigError("scenario", f"no such file: {str(path)!r}") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError("scenario", f"cannot read {str(path)!r}: {exc}") from None
+        return path.stem, parse(text, str(path))
+    packaged = _packaged()
+    if str(name_or_path) not in packaged:
+        close = difflib.get_close_matches(str(name_or_path), list(packaged), n=3)
+        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        raise ConfigError("scenario", f"unknown scenario {str(name_or_path)!r}{hint}; `robotadapt list` shows them all")
+    name = str(name_or_path)
+    return name, parse(packaged[name].read_text(encoding="utf-8"), name)
+
+
+def parse_value(text: str) -> Any:
+    """A `--set` value: any TOML value (`20`, `[10, 20]`, `"rk4"`, `true`), else the bare text as a string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def override(data: dict[str, Any], assignment: str) -> None:
+    """Apply one `section.key=value` (any depth: `plant.disturbance.amplitude=2`) to `data` in place."""
+    key, sep, value = assignment.partition("=")
+    parts = key.strip().split(".")
+    if not sep or len(parts) < 2 or not all(parts):
+        raise ConfigError("--set", f"expected section.key=value (e.g. controller.Kv=20), got {assignment!r}")
+    if parts[0] not in SECTIONS:
+        raise ConfigError(parts[0], f"unknown section in --set {assignment!r}; sections are {', '.join(SECTIONS)}")
+    node = data.setdefault(parts[0], {})
+    for part in parts[1:-1]:
+        node = node.setdefault(part, {})
+        if not isinstance(node, dict):
+            raise ConfigError(".".join(parts[:-1]), f"is a value, not a table, in --set {assignment!r}")
+    node[parts[-1]] = parse_value(value.strip())
+
+
+def load(name_or_path: str | Path, overrides: tuple[str, ...] | list[str] = ()) -> Scenario:
+    """Read a scenario, apply `section.key=value` overrides, and validate every field by building it."""
+    name, data = read(name_or_path)
+    for assignment in overrides:
+        override(data, assignment)
+    return Scenario(name, data, setup(data))

@@ -1,0 +1,180 @@
+"""Desired trajectories: `traj(t) -> Reference(q_des, dq_des, ddq_des)`, each of shape `t.shape + (n,)`.
+
+All are frozen dataclasses with per-joint vectors fixed at construction (use :func:`robotadapt.validation` helpers or the
+`make` constructors to broadcast scalars). Angular frequencies `omega` are in rad/s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, NamedTuple, Protocol
+
+import numpy as np
+
+from ._array import array_namespace
+from .validation import ConfigError, as_array, as_scalar, as_vector
+
+Array = Any
+
+
+class Reference(NamedTuple):
+    """Desired position, velocity and acceleration at some instants, each `(..., n)`."""
+
+    q_des: Array
+    dq_des: Array
+    ddq_des: Array
+
+
+class Trajectory(Protocol):
+    n: int
+
+    def __call__(self, t: Array) -> Reference: ...
+
+
+def _t(t: Array) -> tuple[Any, Array]:
+    xp = array_namespace(t) if hasattr(t, "shape") else np
+    return xp, xp.asarray(t, dtype=xp.float64)[..., None]
+
+
+@dataclass(frozen=True, eq=False)
+class SumOfSines:
+    """q_des,i(t) = offset_i + Σ_k A_ki sin(ω_k t + φ_ki): a sinusoid per joint (one row) or a persistently exciting sum.
+
+    `amplitude` and `phase` have shape `(k, n)`, `omega` shape `(k,)` or `(k, n)`, `offset` shape `(n,)`.
+    `period` is 2π/ω for a single frequency and the common period of commensurate frequencies, else None.
+    """
+
+    amplitude: Array
+    omega: Array
+    phase: Array
+    offset: Array
+
+    @property
+    def n(self) -> int:
+        return int(self.offset.shape[-1])
+
+    @property
+    def period(self) -> float | None:
+        w = np.unique(np.abs(self.omega[self.amplitude != 0]))
+        w = w[w > 0]
+        if w.size == 0:
+            return None
+        base = w.min()
+        ratios = w / base
+        for den in range(1, 13):  # commensurate to a small rational: T = 2π den / ω_min
+            if np.allclose(ratios * den, np.round(ratios * den), rtol=0, atol=1e-9):
+                return float(2 * np.pi * den / base)
+        return None
+
+    def __call__(self, t: Array) -> Reference:
+        xp, tt = _t(t)
+        tt = tt[..., None, :]  # (..., 1, 1) against (k, n)
+        arg = self.omega * tt + self.phase
+        s, c = xp.sin(arg), xp.cos(arg)
+        q = self.offset + xp.sum(self.amplitude * s, axis=-2)
+        dq = xp.sum(self.amplitude * self.omega * c, axis=-2)
+        ddq = -xp.sum(self.amplitude * self.omega**2 * s, axis=-2)
+        return Reference(q, dq, ddq)
+
+    @classmethod
+    def make(cls, n: int, amplitude: Any, omega: Any, phase: Any = 0.0, offset: Any = 0.0) -> SumOfSines:
+        """Validate and broadcast. `omega` lists the k frequencies; `amplitude` and `phase` are each a number, a list of
+        k (one per term, same on every joint), or a k×n table."""
+        w = as_array(omega, "trajectory.omega").reshape(-1)
+        k = w.shape[0]
+        tables = [_term_table(value, k, n, f"trajectory.{name}") for name, value in (("amplitude", amplitude),
+                                                                                       ("phase", phase))]
+        return cls(tables[0], np.repeat(w[:, None], n, axis=1), tables[1], as_vector(offset, n, "trajectory.offset"))
+
+
+def _term_table(value: Any, k: int, n: int, field: str) -> Array:
+    arr = as_array(value, field)
+    if arr.ndim == 1 and arr.shape[0] == k:
+        arr = arr[:, None]
+    if arr.ndim > 2 or (arr.ndim == 2 and arr.shape[0] not in (1, k)) or (arr.ndim >= 1 and arr.shape[-1] not in (1, n)):
+        raise ConfigError(field, f"expected a number, a list of {k} values (one per term) or a {k}x{n} table, "
+                          f"got shape {arr.shape}")
+    return np.broadcast_to(arr, (k, n)).copy()
+
+
+def sinusoid(n: int, amplitude: Any = 1.0, omega: Any = 1.0, phase: Any = 0.0, offset: Any = 0.0) -> SumOfSines:
+    """q_des,i = offset_i + A_i sin(ω_i t + φ_i), per joint (the book's `sin t` is the default)."""
+    def row(value: Any, name: str) -> Array:
+        return as_vector(value, n, f"trajectory.{name}")[None, :]
+
+    return SumOfSines(row(amplitude, "amplitude"), row(omega, "omega"), row(phase, "phase"),
+                      as_vector(offset, n, "trajectory.offset"))
+
+
+@dataclass(frozen=True, eq=False)
+class ExponentialStep:
+    """q_des = start + (final − start)(1 − e^{−a t}): the book's non-exciting `1 − e^{−2t}` (Example 6.5.1)."""
+
+    final: Array
+    rate: Array
+    start: Array
+
+    n = property(lambda self: int(self.final.shape[-1]))
+    period = None
+
+    def __call__(self, t: Array) -> Reference:
+        xp, tt = _t(t)
+        decay = xp.exp(-self.rate * tt)
+        span = self.final - self.start
+        return Reference(self.start + span * (1 - decay), span * self.rate * decay, -span * self.rate**2 * decay)
+
+
+@dataclass(frozen=True, eq=False)
+class Quintic:
+    """Point-to-point quintic from `q0` at `t0` to `q1` at `t1`, zero velocity and acceleration at both ends; held after."""
+
+    q0: Array
+    q1: Array
+    t0: float
+    t1: float
+
+    n = property(lambda self: int(self.q0.shape[-1]))
+    period = None
+
+    def __post_init__(self) -> None:
+        if not self.t1 > self.t0:
+            raise ConfigError("trajectory.t1", f"must be later than t0 = {self.t0:g}, got {self.t1:g}")
+
+    def __call__(self, t: Array) -> Reference:
+        xp, tt = _t(t)
+        T = self.t1 - self.t0
+        s = xp.clip((tt - self.t0) / T, 0.0, 1.0)
+        pos = 10 * s**3 - 15 * s**4 + 6 * s**5
+        vel = (30 * s**2 - 60 * s**3 + 30 * s**4) / T
+        acc = (60 * s - 180 * s**2 + 120 * s**3) / T**2
+        d = self.q1 - self.q0
+        return Reference(self.q0 + d * pos, d * vel, d * acc)
+
+
+@dataclass(frozen=True, eq=False)
+class Constant:
+    """A set point: q_des = value, q̇_des = q̈_des = 0."""
+
+    value: Array
+
+    n = property(lambda self: int(self.value.shape[-1]))
+    period = None
+
+    def __call__(self, t: Array) -> Reference:
+        xp, tt = _t(t)
+        q = self.value + 0.0 * tt
+        return Reference(q, 0.0 * q, 0.0 * q)
+
+
+def exponential_step(n: int, final: Any = 1.0, rate: Any = 2.0, start: Any = 0.0) -> ExponentialStep:
+    return ExponentialStep(as_vector(final, n, "trajectory.final"), as_vector(rate, n, "trajectory.rate", positive=True),
+                           as_vector(start, n, "trajectory.start"))
+
+
+def quintic(n: int, q0: Any, q1: Any, t0: Any = 0.0, t1: Any = 1.0) -> Quintic:
+    return Quintic(as_vector(q0, n, "trajectory.q0"), as_vector(q1, n, "trajectory.q1"),
+                   as_scalar(t0, "trajectory.t0"), as_scalar(t1, "trajectory.t1"))
+
+
+def constant(n: int, value: Any) -> Constant:
+    return Constant(as_vector(value, n, "trajectory.value"))

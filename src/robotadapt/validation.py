@@ -1,0 +1,101 @@
+"""Argument checking done once, at construction, with errors that name the field and the fix.
+
+Every error the library raises on bad input is a :class:`ConfigError`; the CLI prints its message on one line and exits 2.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+Array = np.ndarray
+
+
+class ConfigError(ValueError):
+    """Bad input: the message names the field and says what is expected."""
+
+    def __init__(self, field: str, message: str) -> None:
+        self.field = field
+        self.reason = message
+        super().__init__(f"{field}: {message}" if field else message)
+
+
+def _show(value: Any) -> str:
+    text = np.array2string(np.asarray(value), threshold=8) if isinstance(value, np.ndarray) else repr(value)
+    return text if len(text) < 80 else text[:77] + "..."
+
+
+def as_array(value: Any, field: str) -> Array:
+    """A finite float64 array, or a ConfigError naming `field`."""
+    if isinstance(value, bool | str | bytes) or value is None:
+        raise ConfigError(field, f"expected a number or a list of numbers, got {_show(value)}")
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(field, f"expected a number or a list of numbers, got {_show(value)}") from None
+    if arr.dtype == object or not np.all(np.isfinite(arr)):
+        raise ConfigError(field, f"every entry must be a finite number, got {_show(value)}")
+    return arr
+
+
+def as_scalar(value: Any, field: str, *, positive: bool = False, nonnegative: bool = False) -> float:
+    """A finite float (optionally > 0 or ≥ 0)."""
+    arr = as_array(value, field)
+    if arr.ndim != 0:
+        raise ConfigError(field, f"expected a single number, got {_show(value)}")
+    x = float(arr)
+    if positive and not x > 0:
+        raise ConfigError(field, f"must be positive, got {x:g}")
+    if nonnegative and not x >= 0:
+        raise ConfigError(field, f"must be zero or positive, got {x:g}")
+    return x
+
+
+def as_vector(value: Any, n: int, field: str, *, broadcast: bool = True, positive: bool = False) -> Array:
+    """A length-`n` vector; a scalar is repeated when `broadcast`."""
+    arr = as_array(value, field)
+    if arr.ndim == 0 and broadcast:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        what = f"a number or a list of {n} numbers" if broadcast else f"a list of {n} numbers"
+        raise ConfigError(field, f"expected {what}, got shape {arr.shape}: {_show(value)}")
+    if positive and not np.all(arr > 0):
+        raise ConfigError(field, f"every entry must be positive, got {_show(arr)}")
+    return arr
+
+
+def as_gain(value: Any, n: int, field: str) -> Array:
+    """A gain matrix: a scalar k means k·I, a list means diag(list), an n×n matrix is taken as is.
+
+    The result must be symmetric positive definite (the book's gains are diagonal PD; the proofs need symmetry).
+    """
+    arr = as_array(value, field)
+    if arr.ndim == 0:
+        arr = float(arr) * np.eye(n)
+    elif arr.ndim == 1:
+        if arr.shape != (n,):
+            raise ConfigError(field, f"a list gain is a diagonal and needs {n} entries, got {arr.shape[0]}")
+        arr = np.diag(arr)
+    elif arr.shape != (n, n):
+        raise ConfigError(field, f"expected a scalar, a list of {n} numbers or a {n}x{n} matrix, got shape {arr.shape}")
+    check_spd(arr, field)
+    return arr
+
+
+def check_spd(arr: Array, field: str) -> None:
+    """Raise unless `arr` is symmetric positive definite."""
+    if not np.allclose(arr, arr.T, rtol=1e-10, atol=1e-12 * max(1.0, float(np.abs(arr).max()))):
+        raise ConfigError(field, f"must be symmetric, got {_show(arr)}")
+    eig = np.linalg.eigvalsh(arr)
+    if not eig.min() > 0:
+        raise ConfigError(field, f"must be positive definite (smallest eigenvalue {eig.min():.3g}); use positive gains")
+
+
+def check_names(given: Sequence[str], known: Sequence[str], section: str) -> None:
+    """Raise on the first name in `given` that is not in `known`."""
+    for name in given:
+        if name not in known:
+            raise ConfigError(f"{section}.{name}", f"unknown key; known keys here: {', '.join(sorted(known))}")
+
