@@ -23,6 +23,13 @@ def array_namespace(*arrays: Any) -> Any:
 
 def matrix(xp: Any, rows: list[list[Any]]) -> Any:
     """Stack scalar fields `rows[i][j]` (broadcastable arrays or numbers) into shape `(..., len(rows), len(rows[0]))`."""
+    if xp is np:  # fast path: fill a fresh array (numpy only; other namespaces stack without writes)
+        shape = np.broadcast_shapes(*[np.shape(e) for row in rows for e in row])
+        out = np.empty(shape + (len(rows), len(rows[0])))
+        for i, row in enumerate(rows):
+            for j, e in enumerate(row):
+                out[..., i, j] = e
+        return out
     flat = xp.broadcast_arrays(*[xp.asarray(e, dtype=xp.float64) for row in rows for e in row])
     m = len(rows[0])
     return xp.stack([xp.stack(flat[i * m : (i + 1) * m], axis=-1) for i in range(len(rows))], axis=-2)
@@ -30,6 +37,8 @@ def matrix(xp: Any, rows: list[list[Any]]) -> Any:
 
 def vector(xp: Any, entries: list[Any]) -> Any:
     """Stack scalar fields into shape `(..., len(entries))`."""
+    if xp is np:
+        return matrix(np, [entries])[..., 0, :]
     return xp.stack(xp.broadcast_arrays(*[xp.asarray(e, dtype=xp.float64) for e in entries]), axis=-1)
 
 

@@ -22,7 +22,8 @@ class SimulationResult:
     """Arrays are time-major: `q[k]` is the joint position at `t[k]`; `x` is the controller state, `phi_hat` the
     estimate it holds, `V` the controller's Lyapunov function (None where the theory defines none), `r` its filtered
     error. `phi` is the true parameter vector when the controller's model matches the plant's, else None.
-    `status` is ``"ok"`` or ``"diverged at t=… s: reason"``."""
+    `status` is ``"ok"`` or ``"diverged at t=… s: reason"``. `passivity` is the running integral ∫₀ᵗ −rᵀ Z φ̃ dσ of
+    (6.4.4) for controllers with a regressor, when the truth is known (Simpson's rule on the logged samples)."""
 
     t: Array
     q: Array
@@ -41,6 +42,7 @@ class SimulationResult:
     status: str
     wall_time: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
+    passivity: Array | None = None
 
     @property
     def ok(self) -> bool:
@@ -76,6 +78,8 @@ class SimulationResult:
             out["r"] = self.r
         if self.phi is not None:
             out["phi"] = self.phi
+        if self.passivity is not None:
+            out["passivity"] = self.passivity
         return out
 
     def save(self, directory: str | os.PathLike[str], scenario_text: str | None = None) -> Path:

@@ -14,8 +14,18 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.integrate import cumulative_simpson
 
-from .controllers.base import Controller, HasFilteredError, HasLyapunov
+from ._array import matvec
+from .controllers.base import (
+    Controller,
+    HasFilteredError,
+    HasLyapunov,
+    HasProjection,
+    HasRegressor,
+    NeedsAcceleration,
+    SimulationStop,
+)
 from .plant import Plant
 from .result import SimulationResult
 from .trajectories import Reference, Trajectory
@@ -55,21 +65,43 @@ class SolveIVP:
 
 @dataclass(frozen=True, eq=False)
 class _Loop:
-    """The closed-loop vector field dz/dt = f(t, z)."""
+    """The closed-loop vector field dz/dt = f(t, z); controllers that need q̈ get the plant's acceleration for the
+    torque they just applied (no algebraic loop: their torque does not depend on q̈)."""
 
     plant: Plant
     controller: Controller
     n: int
 
+    @property
+    def needs_acceleration(self) -> bool:
+        return isinstance(self.controller, NeedsAcceleration)
+
     def split(self, z: Array) -> tuple[Array, Array, Array]:
         n = self.n
         return z[..., :n], z[..., n : 2 * n], z[..., 2 * n :]
 
+    def torque(self, t: Array, z: Array, ref: Reference) -> Array:
+        q, dq, x = self.split(z)
+        if self.needs_acceleration:
+            return self.controller.torque(t, x, q, dq, ref)  # type: ignore[attr-defined]
+        return self.controller(t, x, q, dq, ref)[0]
+
     def __call__(self, t: Array, z: Array, ref: Reference) -> Array:
         q, dq, x = self.split(z)
-        tau, dx = self.controller(t, x, q, dq, ref)
-        ddq = self.plant.acceleration(t, q, dq, tau)
+        if self.needs_acceleration:
+            tau = self.controller.torque(t, x, q, dq, ref)  # type: ignore[attr-defined]
+            ddq = self.plant.acceleration(t, q, dq, tau)
+            dx = self.controller.update(t, x, q, dq, ddq, ref)  # type: ignore[attr-defined]
+        else:
+            tau, dx = self.controller(t, x, q, dq, ref)
+            ddq = self.plant.acceleration(t, q, dq, tau)
         return np.concatenate([dq, ddq, dx], axis=-1)
+
+    def project(self, z: Array) -> Array:
+        if not isinstance(self.controller, HasProjection):
+            return z
+        q, dq, x = self.split(z)
+        return np.concatenate([q, dq, self.controller.project(x)], axis=-1)
 
 
 def _diverged(z: Array, max_state: float) -> str | None:
@@ -102,11 +134,15 @@ def _rk4(loop: _Loop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_
             for j in range(m):
                 t = (start + j) * dt
                 r0, rh, r1 = _take(ref, 2 * j), _take(ref, 2 * j + 1), _take(ref, 2 * j + 2)
-                k1 = loop(t, z, r0)
-                k2 = loop(t + 0.5 * dt, z + 0.5 * dt * k1, rh)
-                k3 = loop(t + 0.5 * dt, z + 0.5 * dt * k2, rh)
-                k4 = loop(t + dt, z + dt * k3, r1)
-                z_new = z + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+                try:
+                    k1 = loop(t, z, r0)
+                    k2 = loop(t + 0.5 * dt, z + 0.5 * dt * k1, rh)
+                    k3 = loop(t + 0.5 * dt, z + 0.5 * dt * k2, rh)
+                    k4 = loop(t + dt, z + dt * k3, r1)
+                except SimulationStop as stop:
+                    bar.close()
+                    return t_log[:k_log], z_log[:k_log], f"diverged at t={t:.6g} s: {stop}"
+                z_new = loop.project(z + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
                 reason = _diverged(z_new, max_state)
                 if reason is not None:
                     bar.close()
@@ -132,9 +168,12 @@ def _solve_ivp(loop: _Loop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final
 
     runaway.terminal = True  # type: ignore[attr-defined]
     t_eval = opts.dt * np.arange(int(np.floor(t_final / opts.dt + 1e-9)) + 1)
-    with np.errstate(all="ignore"):
-        sol = solve_ivp(fun, (0.0, t_eval[-1]), z0, method=opts.method, t_eval=t_eval, rtol=opts.rtol,
-                        atol=opts.atol, events=runaway)
+    try:
+        with np.errstate(all="ignore"):
+            sol = solve_ivp(fun, (0.0, t_eval[-1]), z0, method=opts.method, t_eval=t_eval, rtol=opts.rtol,
+                            atol=opts.atol, events=runaway)
+    except SimulationStop as stop:  # solve_ivp keeps nothing: rerun to just before the stop is not worth it
+        return t_eval[:1], z0[None, :], f"diverged at t=0 s or later: {stop} (use method = 'rk4' to keep the partial run)"
     t, z = sol.t, sol.y.T
     finite = np.all(np.isfinite(z), axis=1)
     t, z = t[np.cumprod(finite).astype(bool)], z[np.cumprod(finite).astype(bool)]
@@ -164,7 +203,7 @@ def simulate(plant: Plant, controller: Controller, trajectory: Trajectory, *, t_
     t_final = as_scalar(t_final, "simulation.t_final", positive=True)
     q0 = as_vector(0.0 if q0 is None else q0, n, "plant.q0")
     dq0 = as_vector(0.0 if dq0 is None else dq0, n, "plant.dq0")
-    x0 = controller.initial_state() if x0 is None else np.asarray(x0, dtype=float)
+    x0 = controller.initial_state(q0, dq0) if x0 is None else np.asarray(x0, dtype=float)
     if not isinstance(log_every, int) or log_every < 1:
         raise ConfigError("simulation.log_every", f"must be a positive integer, got {log_every!r}")
     plant.check_state(q0)
@@ -182,16 +221,22 @@ def simulate(plant: Plant, controller: Controller, trajectory: Trajectory, *, t_
 
 def _outputs(loop: _Loop, trajectory: Trajectory, t: Array, z: Array, status: str, wall: float,
              info: dict[str, Any]) -> SimulationResult:
-    """Recompute torque, V(t) and r(t) from the pure maps at the logged instants (one vectorized call each)."""
+    """Recompute torque, V(t), r(t) and the passivity integral (6.4.4) from the pure maps at the logged instants."""
     ctrl, plant = loop.controller, loop.plant
     q, dq, x = loop.split(z)
     ref = trajectory(t)
-    tau, _ = ctrl(t, x, q, dq, ref)
-    V = ctrl.lyapunov(t, x, q, dq, ref, plant.phi) if isinstance(ctrl, HasLyapunov) else None
-    r = ctrl.filtered_error(t, x, q, dq, ref) if isinstance(ctrl, HasFilteredError) else None
+    tau = loop.torque(t, z, ref)
     same_model = ctrl.model.param_names == plant.model.param_names
+    phi = plant.phi if same_model else None
+    V = ctrl.lyapunov(t, x, q, dq, ref, plant.phi) if isinstance(ctrl, HasLyapunov) and same_model else None
+    r = ctrl.filtered_error(t, x, q, dq, ref) if isinstance(ctrl, HasFilteredError) else None
+    phi_hat = ctrl.phi_hat(x)
+    passivity = None
+    if isinstance(ctrl, HasRegressor) and phi is not None and t.size > 1:
+        Z, r_z = ctrl.regressor(t, x, q, dq, ref)
+        passivity = cumulative_simpson(-(r_z * matvec(Z, phi - phi_hat)).sum(axis=-1), x=t, initial=0.0)
     return SimulationResult(
         t=t, q=q, dq=dq, x=x, q_des=ref.q_des, dq_des=ref.dq_des, ddq_des=ref.ddq_des, tau=tau, V=V, r=r,
-        phi_hat=ctrl.phi_hat(x), phi=plant.phi if same_model else None, param_names=ctrl.model.param_names,
-        state_names=ctrl.state_names, status=status, wall_time=wall, info=info,
+        phi_hat=phi_hat, phi=phi, param_names=ctrl.model.param_names, state_names=ctrl.state_names, status=status,
+        wall_time=wall, info=info, passivity=passivity,
     )

@@ -66,10 +66,11 @@ def as_vector(value: Any, n: int, field: str, *, broadcast: bool = True, positiv
     return arr
 
 
-def as_gain(value: Any, n: int, field: str) -> Array:
+def as_gain(value: Any, n: int, field: str, *, semidefinite: bool = False) -> Array:
     """A gain matrix: a scalar k means k·I, a list means diag(list), an n×n matrix is taken as is.
 
-    The result must be symmetric positive definite (the book's gains are diagonal PD; the proofs need symmetry).
+    The result must be symmetric positive definite (the book's gains are diagonal PD; the proofs need symmetry), or
+    positive semidefinite with `semidefinite=True`.
     """
     arr = as_array(value, field)
     if arr.ndim == 0:
@@ -80,16 +81,18 @@ def as_gain(value: Any, n: int, field: str) -> Array:
         arr = np.diag(arr)
     elif arr.shape != (n, n):
         raise ConfigError(field, f"expected a scalar, a list of {n} numbers or a {n}x{n} matrix, got shape {arr.shape}")
-    check_spd(arr, field)
+    check_spd(arr, field, semidefinite)
     return arr
 
 
-def check_spd(arr: Array, field: str) -> None:
-    """Raise unless `arr` is symmetric positive definite."""
+def check_spd(arr: Array, field: str, semidefinite: bool = False) -> None:
+    """Raise unless `arr` is symmetric positive definite (or semidefinite)."""
     if not np.allclose(arr, arr.T, rtol=1e-10, atol=1e-12 * max(1.0, float(np.abs(arr).max()))):
         raise ConfigError(field, f"must be symmetric, got {_show(arr)}")
     eig = np.linalg.eigvalsh(arr)
-    if not eig.min() > 0:
+    if semidefinite and eig.min() < -1e-12 * max(1.0, float(eig.max())):
+        raise ConfigError(field, f"must be positive semidefinite (smallest eigenvalue {eig.min():.3g})")
+    if not semidefinite and not eig.min() > 0:
         raise ConfigError(field, f"must be positive definite (smallest eigenvalue {eig.min():.3g}); use positive gains")
 
 

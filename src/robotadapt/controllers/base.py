@@ -7,6 +7,11 @@ integrals) comes in and its derivative goes out::
 
 with `q, dq` of shape `(..., n)`, `x` of shape `(..., s)`, `ref` a :class:`~robotadapt.trajectories.Reference`.
 Controllers never see the true φ; only the optional monitors (`lyapunov`) take it, to evaluate the theory's V(t).
+
+Optional parts a controller may have, each a protocol below: a Lyapunov function, a filtered error, a regressor with its
+passivity output (for the integral (6.4.4)), acceleration feedback (Table 6.2.1 needs q̈), and a projection of its state
+applied after every integration step. A controller may raise :class:`SimulationStop` when its own assumptions fail
+(e.g. M̂ singular); the simulator ends the run there and keeps the partial result.
 """
 
 from __future__ import annotations
@@ -30,7 +35,8 @@ class Controller(Protocol):
     def state_names(self) -> tuple[str, ...]:
         """Names of the entries of the state vector x."""
 
-    def initial_state(self) -> Array: ...
+    def initial_state(self, q0: Array, dq0: Array) -> Array:
+        """The state x at t = 0, given the first measurement (filters that start from it need it)."""
 
     def phi_hat(self, x: Array) -> Array:
         """The parameter estimate held in (or fixed by) the controller, shape `x.shape[:-1] + (p,)`."""
@@ -42,6 +48,32 @@ class Controller(Protocol):
 class HasLyapunov(Protocol):
     def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
         """The Lyapunov function of the controller's stability proof, evaluated with the true φ."""
+
+
+@runtime_checkable
+class HasRegressor(Protocol):
+    def regressor(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+        """(Z, r): the regressor multiplying φ̂ in the torque and the filtered error, so that M ṙ + V_m r = Zφ − τ;
+        the passivity integral (6.4.4) is ∫ −rᵀ Z φ̃."""
+
+
+@runtime_checkable
+class NeedsAcceleration(Protocol):
+    """A controller whose update law needs the measured joint acceleration (Table 6.2.1). Its torque must not."""
+
+    def torque(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array: ...
+
+    def update(self, t: Array, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference) -> Array: ...
+
+
+@runtime_checkable
+class HasProjection(Protocol):
+    def project(self, x: Array) -> Array:
+        """Map the state back into its admissible set (applied after every fixed step)."""
+
+
+class SimulationStop(RuntimeError):
+    """Raised from a controller or plant when the run cannot go on; the message says why."""
 
 
 @runtime_checkable

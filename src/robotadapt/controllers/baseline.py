@@ -30,7 +30,7 @@ class _Fixed:
     def state_names(self) -> tuple[str, ...]:
         return ()
 
-    def initial_state(self) -> Array:
+    def initial_state(self, q0: Array, dq0: Array) -> Array:
         return np.zeros(0)
 
     def phi_hat(self, x: Array) -> Array:

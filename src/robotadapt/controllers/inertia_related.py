@@ -44,7 +44,7 @@ class InertiaRelated:
     def state_names(self) -> tuple[str, ...]:
         return tuple(f"{name}_hat" for name in self.model.param_names)
 
-    def initial_state(self) -> Array:
+    def initial_state(self, q0: Array, dq0: Array) -> Array:
         return self.phi_hat0.copy()
 
     def phi_hat(self, x: Array) -> Array:
@@ -54,14 +54,14 @@ class InertiaRelated:
         e, de = errors(q, dq, ref)
         return de + e @ self.Lam.T
 
-    def regressor(self, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+    def regressor(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         """(Y, r) with the Slotine–Li reference velocity q̇_d + Λe and acceleration q̈_d + Λė (6.3.11)."""
         e, de = errors(q, dq, ref)
         r = de + e @ self.Lam.T
         return self.model.regressor(q, dq, ref.dq_des + e @ self.Lam.T, ref.ddq_des + de @ self.Lam.T), r
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
-        Y, r = self.regressor(q, dq, ref)
+        Y, r = self.regressor(t, x, q, dq, ref)
         tau = matvec(Y, x) + r @ self.Kv.T
         dx = matvec(Y.mT, r) @ self.Gamma.T
         return tau, dx

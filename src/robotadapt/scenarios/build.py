@@ -6,6 +6,7 @@ key is an error that lists the known ones, and a missing required key names itse
 
 from __future__ import annotations
 
+import importlib
 import inspect
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, fields, is_dataclass
@@ -13,26 +14,58 @@ from typing import Any
 
 import numpy as np
 
-from .. import controllers, trajectories
 from ..plant import Plant, sinusoidal_disturbance
-from ..robots import OneLinkArm, PolarArm, RobotModel, TwoLinkArm
+from ..robots import RobotModel
 from ..simulation import RK4, SolveIVP
 from ..validation import ConfigError, as_scalar, as_vector, check_names
 
-ROBOTS: dict[str, Callable[..., RobotModel]] = {"one_link": OneLinkArm, "two_link": TwoLinkArm, "polar": PolarArm}
-TRAJECTORIES: dict[str, Callable[..., Any]] = {
-    "sinusoid": trajectories.sinusoid,
-    "sum_of_sines": trajectories.SumOfSines.make,
-    "exponential_step": trajectories.exponential_step,
-    "quintic": trajectories.quintic,
-    "constant": trajectories.constant,
+# kind → "module:attribute" (imported on use, so optional parts cost nothing until named) and what the constructor
+# takes first: the robot model, the joint count n, the parameter count p, or nothing.
+REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
+    "robot": {
+        "one_link": ("robots.one_link:OneLinkArm", None),
+        "two_link": ("robots.two_link:TwoLinkArm", None),
+        "polar": ("robots.polar:PolarArm", None),
+    },
+    "trajectory": {
+        "sinusoid": ("trajectories:sinusoid", "n"),
+        "sum_of_sines": ("trajectories:SumOfSines.make", "n"),
+        "exponential_step": ("trajectories:exponential_step", "n"),
+        "quintic": ("trajectories:quintic", "n"),
+        "constant": ("trajectories:constant", "n"),
+    },
+    "controller": {
+        "slotine_li": ("controllers.inertia_related:InertiaRelated", "model"),
+        "computed_torque": ("controllers.baseline:ComputedTorque", "model"),
+        "pd": ("controllers.baseline:PD", "model"),
+        "pd_gravity": ("controllers.baseline:PDGravity", "model"),
+        "adaptive_computed_torque": ("controllers.computed_torque:AdaptiveComputedTorque", "model"),
+        "passivity": ("controllers.passivity:PassivityBased", "model"),
+        "composite": ("controllers.composite:Composite", "model"),
+        "sign_robust": ("controllers.robust:SignRobust", "model"),
+    },
+    "servo": {
+        "pd": ("controllers.passivity:pd_servo", "n"),
+        "pid": ("controllers.passivity:pid_servo", "n"),
+        "state_space": ("controllers.passivity:state_space_servo", "n"),
+    },
+    "law": {
+        "gradient": ("adaptation:Gradient", "p"),
+        "landau_pi": ("adaptation:LandauPI", "p"),
+        "sigma": ("adaptation:SwitchingSigma", "p"),
+    },
 }
-CONTROLLERS: dict[str, Callable[..., Any]] = {
-    "slotine_li": controllers.InertiaRelated,
-    "computed_torque": controllers.ComputedTorque,
-    "pd": controllers.PD,
-    "pd_gravity": controllers.PDGravity,
-}
+# keys whose value is itself a table with a kind, and the registry it names
+NESTED = {"servo": "servo", "law": "law", "base": "controller"}
+FIRST_ARG = {"model": "model", "n": "n", "p": "p"}
+
+
+def _resolve(target: str) -> Callable[..., Any]:
+    module, _, attr = target.partition(":")
+    obj: Any = importlib.import_module(f"robotadapt.{module}")
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,44 +83,57 @@ class Setup:
     max_state: float
 
 
-def _params(ctor: Callable[..., Any], skip: tuple[str, ...]) -> dict[str, bool]:
-    """The constructor's keyword names → whether each is required."""
+def _params(ctor: Callable[..., Any], first: str | None) -> dict[str, bool]:
+    """The constructor's keyword names (less its first argument) → whether each is required."""
     if is_dataclass(ctor):
-        return {f.name: f.default is MISSING and f.default_factory is MISSING for f in fields(ctor) if f.name not in skip}
-    sig = inspect.signature(ctor)
-    return {k: p.default is inspect.Parameter.empty for k, p in sig.parameters.items() if k not in skip}
+        names = {f.name: f.default is MISSING and f.default_factory is MISSING for f in fields(ctor)}
+    else:
+        sig = inspect.signature(ctor)
+        names = {k: p.default is inspect.Parameter.empty for k, p in sig.parameters.items()}
+    if first is not None:
+        names.pop(next(iter(names)))
+    return names
 
 
-def _kind(section: dict[str, Any], table: dict[str, Callable[..., Any]], name: str,
-          skip: tuple[str, ...], defaults: dict[str, Any] | None = None) -> Any:
-    """Call the constructor that `section['kind']` names with the section's other keys."""
+def build(registry: str, section: Any, name: str, model: RobotModel | None = None) -> Any:
+    """Call the constructor that `section['kind']` names in `REGISTRY[registry]` with the section's other keys; nested
+    tables (servo, law, base) are built first. `phi_hat0` defaults to zeros."""
+    table = REGISTRY[registry]
     if not isinstance(section, dict):
-        raise ConfigError(name, f"expected a table of settings, got {section!r}")
+        raise ConfigError(name, f"expected a table with a kind ({', '.join(sorted(table))}), got {section!r}")
     kind = section.get("kind")
     if not isinstance(kind, str) or kind not in table:
         raise ConfigError(f"{name}.kind", f"expected one of {', '.join(sorted(table))}; got {kind!r}")
-    ctor = table[kind]
-    params = _params(ctor, skip)
+    target, first = table[kind]
+    ctor = _resolve(target)
+    params = _params(ctor, first)
     keys = {k: v for k, v in section.items() if k != "kind"}
     check_names(list(keys), list(params), name)
-    for key, value in (defaults or {}).items():
-        if key in params:
-            keys.setdefault(key, value)
+    if "phi_hat0" in params and model is not None:
+        keys.setdefault("phi_hat0", np.zeros(model.p))
     for key, required in params.items():
         if required and key not in keys:
             raise ConfigError(f"{name}.{key}", f"missing; kind {kind!r} takes {', '.join(params)}")
-    return ctor, keys
+    for key in NESTED.keys() & keys.keys():
+        keys[key] = build(NESTED[key], keys[key], f"{name}.{key}", model)
+    if first is None:
+        return ctor(**keys)
+    assert model is not None
+    arg = {"model": model, "n": model.n, "p": model.p}[first]
+    return ctor(arg, **keys)
 
 
-def robot(section: dict[str, Any]) -> RobotModel:
-    ctor, keys = _kind(section, ROBOTS, "robot", ())
-    for key, value in keys.items():
-        if isinstance(value, bool):
-            continue
-        if key in ("stiffness", "friction_terms"):
-            raise ConfigError(f"robot.{key}", f"expected true or false, got {value!r}")
-        keys[key] = as_scalar(value, f"robot.{key}", positive=True)
-    return ctor(**keys)
+def robot(section: Any) -> RobotModel:
+    """Robot constants are positive numbers, switches are true/false."""
+    if isinstance(section, dict):
+        section = dict(section)
+        for key, value in section.items():
+            if key == "kind" or isinstance(value, bool):
+                continue
+            if key in ("stiffness", "friction_terms"):
+                raise ConfigError(f"robot.{key}", f"expected true or false, got {value!r}")
+            section[key] = as_scalar(value, f"robot.{key}", positive=True)
+    return build("robot", section, "robot")
 
 
 def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray, np.ndarray]:
@@ -106,16 +152,6 @@ def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray
     q0 = as_vector(section.get("q0", 0.0), model.n, "plant.q0")
     dq0 = as_vector(section.get("dq0", 0.0), model.n, "plant.dq0")
     return Plant(model, phi, dist), q0, dq0
-
-
-def trajectory(section: dict[str, Any], model: RobotModel) -> Any:
-    ctor, keys = _kind(section, TRAJECTORIES, "trajectory", ("n", "cls"))
-    return ctor(model.n, **keys)
-
-
-def controller(section: dict[str, Any], model: RobotModel) -> Any:
-    ctor, keys = _kind(section, CONTROLLERS, "controller", ("model",), {"phi_hat0": np.zeros(model.p)})
-    return ctor(model, **keys)
 
 
 def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP, int, float]:
@@ -152,5 +188,6 @@ def setup(data: dict[str, Any]) -> Setup:
     model = robot(data["robot"])
     the_plant, q0, dq0 = plant(data["plant"], model)
     t_final, integ, log_every, max_state = simulation(data["simulation"])
-    return Setup(the_plant, controller(data["controller"], model), trajectory(data["trajectory"], model), t_final,
-                 integ, q0, dq0, log_every, max_state)
+    return Setup(the_plant, build("controller", data["controller"], "controller", model),
+                 build("trajectory", data["trajectory"], "trajectory", model), t_final, integ, q0, dq0, log_every,
+                 max_state)

@@ -1,0 +1,162 @@
+"""Parameter update laws as parts a controller composes (spec §4.2, §4.5, §7.3).
+
+A law sees the passivity output y = Zᵀ r of its controller (Z the regressor, r the filtered error) and keeps its own
+state `xa` (shape `(..., state_size)`):
+
+    φ̂ = law.estimate(xa, y),   dxa/dt = law.derivative(xa, y)
+
+`lyapunov(xa, phi)` is the parameter part of the controller's Lyapunov function (with the true φ, for monitors only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any, Protocol
+
+import numpy as np
+
+from ._array import array_namespace
+from .validation import as_gain, as_scalar
+
+Array = Any
+
+
+def _quad(x: Array, A: Array) -> Array:
+    return ((x @ A.T) * x).sum(axis=-1)
+
+
+class UpdateLaw(Protocol):
+    p: int
+
+    @property
+    def state_size(self) -> int: ...
+
+    def initial_state(self, phi_hat0: Array) -> Array: ...
+
+    def estimate(self, xa: Array, y: Array) -> Array: ...
+
+    def derivative(self, xa: Array, y: Array) -> Array: ...
+
+    def lyapunov(self, xa: Array, phi: Array) -> Array: ...
+
+
+@dataclass(frozen=True, eq=False)
+class Gradient:
+    """Gradient law of Example 6.4.1: dφ̂/dt = Γ Zᵀ r. Passive with β = ½ φ̃(0)ᵀ Γ⁻¹ φ̃(0) (spec §4.2)."""
+
+    p: int
+    Gamma: Any
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "Gamma", as_gain(self.Gamma, self.p, "controller.law.Gamma"))
+
+    @cached_property
+    def _Gamma_inv(self) -> Array:
+        return np.linalg.inv(self.Gamma)
+
+    @property
+    def state_size(self) -> int:
+        return self.p
+
+    def initial_state(self, phi_hat0: Array) -> Array:
+        return np.array(phi_hat0, dtype=float)
+
+    def estimate(self, xa: Array, y: Array) -> Array:
+        return xa
+
+    def derivative(self, xa: Array, y: Array) -> Array:
+        return y @ self.Gamma.T
+
+    def lyapunov(self, xa: Array, phi: Array) -> Array:
+        """½ φ̃ᵀ Γ⁻¹ φ̃ (6.3.7)."""
+        return 0.5 * _quad(phi - xa, self._Gamma_inv)
+
+
+@dataclass(frozen=True, eq=False)
+class LandauPI:
+    """Landau's PI adaptation, (6.4.20) with F_I(t) = K_I (6.4.21):
+
+    φ̂ = φ̂_I + F_p Zᵀ r,   dφ̂_I/dt = K_I Zᵀ r,   φ̂_I(0) = φ̂(0).
+
+    State φ̂_I. Passive: ∫ −rᵀ Z φ̃ ≥ −½ φ̃_I(0)ᵀ K_I⁻¹ φ̃_I(0) (spec §4.5). F_p = 0 is the gradient law.
+    """
+
+    p: int
+    K_I: Any
+    F_p: Any
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "K_I", as_gain(self.K_I, self.p, "controller.law.K_I"))
+        object.__setattr__(self, "F_p", as_gain(self.F_p, self.p, "controller.law.F_p", semidefinite=True))
+
+    @cached_property
+    def _K_I_inv(self) -> Array:
+        return np.linalg.inv(self.K_I)
+
+    @property
+    def state_size(self) -> int:
+        return self.p
+
+    def initial_state(self, phi_hat0: Array) -> Array:
+        return np.array(phi_hat0, dtype=float)
+
+    def estimate(self, xa: Array, y: Array) -> Array:
+        return xa + y @ self.F_p.T
+
+    def derivative(self, xa: Array, y: Array) -> Array:
+        return y @ self.K_I.T
+
+    def lyapunov(self, xa: Array, phi: Array) -> Array:
+        """½ φ̃_Iᵀ K_I⁻¹ φ̃_I: with ½ rᵀ M r its derivative is −rᵀ K_v r − yᵀ F_p y ≤ 0."""
+        return 0.5 * _quad(phi - xa, self._K_I_inv)
+
+
+@dataclass(frozen=True, eq=False)
+class SwitchingSigma:
+    """Switching σ-modification of Reed & Ioannou (6.7.13)–(6.7.14):
+
+    dφ̂/dt = Γ Zᵀ r − σ_s S φ̂,   σ_s = σ0 · clip(‖φ̂‖/φ0 − 1, 0, 1)
+
+    with S = I (the book's form, σ0 = 1) or S = Γ (`scaled = true`, Ioannou's form). φ0 > ‖φ‖ is an a-priori bound on
+    the true parameters (6.7.15). The leakage keeps φ̂ bounded under disturbances; the tracking error then only enters a
+    residual set (spec §7.3).
+    """
+
+    p: int
+    Gamma: Any
+    phi0: Any
+    sigma0: Any = 1.0
+    scaled: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "Gamma", as_gain(self.Gamma, self.p, "controller.law.Gamma"))
+        object.__setattr__(self, "phi0", as_scalar(self.phi0, "controller.law.phi0", positive=True))
+        object.__setattr__(self, "sigma0", as_scalar(self.sigma0, "controller.law.sigma0", positive=True))
+
+    @cached_property
+    def _Gamma_inv(self) -> Array:
+        return np.linalg.inv(self.Gamma)
+
+    @property
+    def state_size(self) -> int:
+        return self.p
+
+    def initial_state(self, phi_hat0: Array) -> Array:
+        return np.array(phi_hat0, dtype=float)
+
+    def estimate(self, xa: Array, y: Array) -> Array:
+        return xa
+
+    def sigma(self, xa: Array) -> Array:
+        """σ_s of (6.7.14): 0 inside ‖φ̂‖ < φ0, a linear ramp to σ0 at 2φ0, σ0 beyond."""
+        xp = array_namespace(xa)
+        norm = xp.sqrt((xa * xa).sum(axis=-1))
+        return self.sigma0 * xp.clip(norm / self.phi0 - 1.0, 0.0, 1.0)
+
+    def derivative(self, xa: Array, y: Array) -> Array:
+        leak = xa @ self.Gamma.T if self.scaled else xa
+        return y @ self.Gamma.T - self.sigma(xa)[..., None] * leak
+
+    def lyapunov(self, xa: Array, phi: Array) -> Array:
+        return 0.5 * _quad(phi - xa, self._Gamma_inv)
