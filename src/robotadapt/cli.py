@@ -41,6 +41,30 @@ def _fmt(values: list[float]) -> str:
     return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
 
 
+def _summary(name: str, m: dict) -> None:
+    print(f"{name}: {m['status']}; t = {m['t_end']:.4g} s, final |e| = {_fmt(m['final_abs_error'])}, "
+          f"RMS e = {_fmt(m['rms_error'])}, final {', '.join(m['param_names'])} = {_fmt(m['final_phi_hat'])}")
+
+
+def _study(scenario, out: Path, no_plots: bool) -> None:  # type: ignore[no-untyped-def]
+    """Run the scenario's [study] variants; write study.json and one overlay figure per varied key."""
+    import json
+
+    from .result import atomic_write
+    from .study import run_study, summary
+
+    runs = run_study(scenario, progress=True)
+    for group in runs.values():
+        for run in group:
+            _summary(f"  {run.key} = {run.value}", run.result.metrics())
+    atomic_write(out / "study.json", lambda f: json.dump(summary(runs), f, indent=2))
+    if not no_plots:
+        from .plotting import study
+
+        for key, group in runs.items():
+            study(key, group, out / f"study_{key.replace('.', '_')}.png", scenario.name)
+
+
 def _run(args: argparse.Namespace) -> int:
     from .scenarios import load
 
@@ -55,9 +79,9 @@ def _run(args: argparse.Namespace) -> int:
     result.save(out, scenario.text)
     if not args.no_plots:
         result.plot(out, title=scenario.name)
-    m = result.metrics()
-    print(f"{scenario.name}: {m['status']}; t = {m['t_end']:.4g} s, final |e| = {_fmt(m['final_abs_error'])}, "
-          f"RMS e = {_fmt(m['rms_error'])}, final {', '.join(m['param_names'])} = {_fmt(m['final_phi_hat'])}")
+    _summary(scenario.name, result.metrics())
+    if scenario.study:
+        _study(scenario, out, args.no_plots)
     print(f"wrote {out}/")
     return 0 if result.ok else EXIT_DIVERGED
 

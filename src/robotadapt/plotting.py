@@ -60,3 +60,21 @@ def save_figures(res: SimulationResult, directory: Path, title: str = "") -> lis
     return [tracking_error(res, directory / "tracking_error.png", title),
             parameters(res, directory / "parameters.png", title),
             torques(res, directory / "torques.png", title)]
+
+
+def study(key: str, runs: list[Any], path: Path, title: str = "") -> Path:
+    """Overlay of a one-at-a-time study: ‖e(t)‖ and ‖φ̃(t)‖ (or ‖φ̂(t)‖ when the truth is unknown), one line per value."""
+    import numpy as np
+
+    fig, (ax_e, ax_p) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    for run in runs:
+        res = run.result
+        ax_e.semilogy(res.t, np.linalg.norm(res.e, axis=-1) + 1e-16, label=f"{key} = {run.value}")
+        err = res.phi_err if res.phi_err is not None else res.phi_hat
+        ax_p.semilogy(res.t, np.linalg.norm(err, axis=-1) + 1e-16, label=f"{key} = {run.value}")
+    ax_e.set_ylabel("‖e‖")
+    ax_e.grid(True, alpha=0.3)
+    ax_e.legend(loc="best", fontsize="small")
+    ax_p.set_ylabel("‖φ − φ̂‖" if runs and runs[0].result.phi is not None else "‖φ̂‖")
+    ax_e.set_title(f"{title} — effect of {key}".strip(" —"))
+    return _finish(fig, ax_p, "", path)

@@ -6,6 +6,7 @@ A scenario is a TOML file with a one-line `description` and the sections `[robot
 
 from __future__ import annotations
 
+import copy
 import difflib
 import sys
 from dataclasses import dataclass
@@ -15,6 +16,7 @@ from typing import Any
 
 import tomli_w
 
+from ..study import assignment
 from ..validation import ConfigError
 from .build import Setup, setup
 
@@ -24,7 +26,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 SECTIONS = ("robot", "plant", "trajectory", "controller", "simulation")
-TOP_KEYS = ("description", "notes")
+TOP_KEYS = ("description", "notes", "study")
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +40,18 @@ class Scenario:
     @property
     def description(self) -> str:
         return str(self.data.get("description", ""))
+
+    @property
+    def study(self) -> dict[str, list[Any]]:
+        """The `[study]` table: dotted keys → values to try one at a time around this setting."""
+        return dict(self.data.get("study", {}))
+
+    def variant(self, assignment: str) -> Scenario:
+        """This scenario with one more `section.key=value` override (validated), without its study."""
+        data = copy.deepcopy(self.data)
+        data.pop("study", None)
+        override(data, assignment)
+        return Scenario(f"{self.name} [{assignment}]", data, setup(data))
 
     @property
     def text(self) -> str:
@@ -123,9 +137,28 @@ def override(data: dict[str, Any], assignment: str) -> None:
     node[parts[-1]] = parse_value(value.strip())
 
 
+def _check_study(data: dict[str, Any]) -> None:
+    study = data.get("study", {})
+    if not isinstance(study, dict):
+        raise ConfigError("study", "expected a table of \"section.key\" = [values to try]")
+    for key, values in study.items():
+        if not isinstance(values, list) or not values:
+            raise ConfigError(f"study.{key}", f"expected a non-empty list of values to try, got {values!r}")
+        for value in values:  # each variant must build: errors name the study key
+            trial = copy.deepcopy(data)
+            trial.pop("study")
+            try:
+                override(trial, assignment(key, value))
+                setup(trial)
+            except ConfigError as exc:
+                raise ConfigError(f"study.{key}", f"value {value!r} does not build: {exc}") from None
+
+
 def load(name_or_path: str | Path, overrides: tuple[str, ...] | list[str] = ()) -> Scenario:
     """Read a scenario, apply `section.key=value` overrides, and validate every field by building it."""
     name, data = read(name_or_path)
-    for assignment in overrides:
-        override(data, assignment)
-    return Scenario(name, data, setup(data))
+    for item in overrides:
+        override(data, item)
+    scenario = Scenario(name, data, setup(data))
+    _check_study(data)
+    return scenario
