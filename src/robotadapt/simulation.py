@@ -19,11 +19,13 @@ from scipy.integrate import cumulative_simpson
 from ._array import matvec
 from .controllers.base import (
     Controller,
+    HasDelayLine,
     HasFilteredError,
     HasLyapunov,
     HasProjection,
     HasRegressor,
     NeedsAcceleration,
+    Prepares,
     SimulationStop,
 )
 from .plant import Plant
@@ -116,8 +118,30 @@ def _take(ref: Reference, i: int) -> Reference:
     return Reference(ref.q_des[i], ref.dq_des[i], ref.ddq_des[i])
 
 
+@dataclass
+class _DelayLine:
+    """The ring buffer of a controller with a delay line (HasDelayLine), owned here so the controller stays pure."""
+
+    buffer: Array
+
+    def sample(self, loop: _Loop, k: int, t: float, z: Array, ref: Reference) -> Array:
+        q, dq, x = loop.split(z)
+        slot = k % self.buffer.shape[0]
+        x_new, store = loop.controller.sample(t, x, q, dq, ref, self.buffer[slot])  # type: ignore[attr-defined]
+        self.buffer[slot] = store
+        return np.concatenate([q, dq, x_new], axis=-1)
+
+
+def _rk4_step(loop: _Loop, t: float, z: Array, dt: float, r0: Reference, rh: Reference, r1: Reference) -> Array:
+    k1 = loop(t, z, r0)
+    k2 = loop(t + 0.5 * dt, z + 0.5 * dt * k1, rh)
+    k3 = loop(t + 0.5 * dt, z + 0.5 * dt * k2, rh)
+    k4 = loop(t + dt, z + dt * k3, r1)
+    return loop.project(z + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
+
+
 def _rk4(loop: _Loop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int, max_state: float,
-         progress: bool) -> tuple[Array, Array, str]:
+         progress: bool, line: _DelayLine | None) -> tuple[Array, Array, str]:
     """Fixed-step RK4 from t = 0; returns logged (t, z) and the status."""
     from tqdm import tqdm
 
@@ -125,35 +149,30 @@ def _rk4(loop: _Loop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_
     t_log = np.empty(n_log)
     z_log = np.empty((n_log,) + z0.shape)
     t_log[0], z_log[0] = 0.0, z0
-    z, status, k_log = z0, "ok", 1
-    bar = tqdm(total=n_steps, delay=1.0, disable=not progress, unit="step", leave=False, file=sys.stderr)
-    with np.errstate(all="ignore"):
+    z, k_log = z0, 1
+    with tqdm(total=n_steps, delay=1.0, disable=not progress, unit="step", leave=False, file=sys.stderr) as bar, \
+            np.errstate(all="ignore"):
         for start in range(0, n_steps, _CHUNK):
             m = min(_CHUNK, n_steps - start)
             ref = traj(dt * (start + 0.5 * np.arange(2 * m + 1)))
             for j in range(m):
                 t = (start + j) * dt
-                r0, rh, r1 = _take(ref, 2 * j), _take(ref, 2 * j + 1), _take(ref, 2 * j + 2)
+                r0 = _take(ref, 2 * j)
                 try:
-                    k1 = loop(t, z, r0)
-                    k2 = loop(t + 0.5 * dt, z + 0.5 * dt * k1, rh)
-                    k3 = loop(t + 0.5 * dt, z + 0.5 * dt * k2, rh)
-                    k4 = loop(t + dt, z + dt * k3, r1)
+                    if line is not None:
+                        z = line.sample(loop, start + j, t, z, r0)
+                    z_new = _rk4_step(loop, t, z, dt, r0, _take(ref, 2 * j + 1), _take(ref, 2 * j + 2))
                 except SimulationStop as stop:
-                    bar.close()
                     return t_log[:k_log], z_log[:k_log], f"diverged at t={t:.6g} s: {stop}"
-                z_new = loop.project(z + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
                 reason = _diverged(z_new, max_state)
                 if reason is not None:
-                    bar.close()
                     return t_log[:k_log], z_log[:k_log], f"diverged at t={t + dt:.6g} s: {reason}"
                 z = z_new
                 if (start + j + 1) % log_every == 0:
                     t_log[k_log], z_log[k_log] = (start + j + 1) * dt, z
                     k_log += 1
             bar.update(m)
-    bar.close()
-    return t_log[:k_log], z_log[:k_log], status
+    return t_log[:k_log], z_log[:k_log], "ok"
 
 
 def _solve_ivp(loop: _Loop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
@@ -207,12 +226,20 @@ def simulate(plant: Plant, controller: Controller, trajectory: Trajectory, *, t_
     if not isinstance(log_every, int) or log_every < 1:
         raise ConfigError("simulation.log_every", f"must be a positive integer, got {log_every!r}")
     plant.check_state(q0)
+    step = integrator.dt
+    if isinstance(controller, Prepares):
+        controller = controller.prepare(trajectory, step, t_final)
+    line = None
+    if isinstance(controller, HasDelayLine):
+        if not isinstance(integrator, RK4):
+            raise ConfigError("simulation.method", "a controller with a delay line (repetitive) needs method = 'rk4'")
+        line = _DelayLine(np.array(controller.delay_line(step, q0, dq0), dtype=float))
     loop = _Loop(plant, controller, n)
     z0 = np.concatenate([q0, dq0, x0])
     wall = time.perf_counter()
     if isinstance(integrator, RK4):
         n_steps = int(np.ceil(t_final / integrator.dt - 1e-9))
-        t, z, status = _rk4(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress)
+        t, z, status = _rk4(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress, line)
     else:
         t, z, status = _solve_ivp(loop, trajectory, z0, integrator, t_final, max_state)
     wall = time.perf_counter() - wall
@@ -226,17 +253,18 @@ def _outputs(loop: _Loop, trajectory: Trajectory, t: Array, z: Array, status: st
     q, dq, x = loop.split(z)
     ref = trajectory(t)
     tau = loop.torque(t, z, ref)
+    phi_hat = ctrl.phi_hat(x)
     same_model = ctrl.model.param_names == plant.model.param_names
-    phi = plant.phi if same_model else None
+    phi = plant.phi if same_model and phi_hat.shape[-1] == plant.model.p else None
     V = ctrl.lyapunov(t, x, q, dq, ref, plant.phi) if isinstance(ctrl, HasLyapunov) and same_model else None
     r = ctrl.filtered_error(t, x, q, dq, ref) if isinstance(ctrl, HasFilteredError) else None
-    phi_hat = ctrl.phi_hat(x)
     passivity = None
     if isinstance(ctrl, HasRegressor) and phi is not None and t.size > 1:
         Z, r_z = ctrl.regressor(t, x, q, dq, ref)
         passivity = cumulative_simpson(-(r_z * matvec(Z, phi - phi_hat)).sum(axis=-1), x=t, initial=0.0)
     return SimulationResult(
         t=t, q=q, dq=dq, x=x, q_des=ref.q_des, dq_des=ref.dq_des, ddq_des=ref.ddq_des, tau=tau, V=V, r=r,
-        phi_hat=phi_hat, phi=phi, param_names=ctrl.model.param_names, state_names=ctrl.state_names, status=status,
+        phi_hat=phi_hat, phi=phi, param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
+        state_names=ctrl.state_names, status=status,
         wall_time=wall, info=info, passivity=passivity,
     )

@@ -72,6 +72,26 @@ class HasProjection(Protocol):
         """Map the state back into its admissible set (applied after every fixed step)."""
 
 
+@runtime_checkable
+class HasDelayLine(Protocol):
+    """A controller with a delay line of one period (the repetitive law (7.2.32)); it needs the fixed-step integrator.
+
+    At the start of every step k the simulator reads `past` = the value stored N steps earlier, calls `sample`, writes
+    back what it returns, and keeps the new state x constant over the step's stages (x holds the sampled part)."""
+
+    def delay_line(self, dt: float, q0: Array, dq0: Array) -> Array:
+        """The initial contents of the line, shape `(N, ...)`, N steps of `dt` per period."""
+
+    def sample(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, past: Array) -> tuple[Array, Array]:
+        """(new state x, value to store in the line now)."""
+
+
+@runtime_checkable
+class Prepares(Protocol):
+    def prepare(self, trajectory: Any, dt: float, t_final: float) -> Controller:
+        """A copy of the controller with tables computed ahead of the run (e.g. Y_d along the desired trajectory)."""
+
+
 class SimulationStop(RuntimeError):
     """Raised from a controller or plant when the run cannot go on; the message says why."""
 

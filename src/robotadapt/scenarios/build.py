@@ -43,6 +43,8 @@ REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
         "passivity": ("controllers.passivity:PassivityBased", "model"),
         "composite": ("controllers.composite:Composite", "model"),
         "sign_robust": ("controllers.robust:SignRobust", "model"),
+        "dcal": ("controllers.dcal:DCAL", "model"),
+        "repetitive": ("controllers.repetitive:Repetitive", "model"),
     },
     "servo": {
         "pd": ("controllers.passivity:pd_servo", "n"),
@@ -86,7 +88,8 @@ class Setup:
 def _params(ctor: Callable[..., Any], first: str | None) -> dict[str, bool]:
     """The constructor's keyword names (less its first argument) → whether each is required."""
     if is_dataclass(ctor):
-        names = {f.name: f.default is MISSING and f.default_factory is MISSING for f in fields(ctor)}
+        names = {f.name: f.default is MISSING and f.default_factory is MISSING for f in fields(ctor)
+                 if not f.metadata.get("internal")}
     else:
         sig = inspect.signature(ctor)
         names = {k: p.default is inspect.Parameter.empty for k, p in sig.parameters.items()}

@@ -1,0 +1,120 @@
+"""Desired compensation adaptation law of Sadegh & Horowitz (spec §8, Table 7.2.1)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from .._array import matvec
+from ..robots.base import RobotModel
+from ..trajectories import Reference
+from ..validation import ConfigError, as_gain, as_scalar
+from .base import Array, errors, estimate, quad
+
+_MAX_TABLE_BYTES = 2e9
+
+
+@dataclass(frozen=True, eq=False)
+class DesiredRegressorTable:
+    """Y_d sampled on the half-step grid t = k·h of a fixed-step run (h = dt/2, what RK4's stages visit)."""
+
+    h: float
+    values: Array
+
+    def lookup(self, t: Array) -> Array | None:
+        """Y_d at `t` if every instant lies on the grid, else None (the caller then evaluates on line)."""
+        k = np.rint(np.asarray(t) / self.h).astype(int)
+        if np.any(k < 0) or np.any(k >= self.values.shape[0]) or not np.allclose(k * self.h, t, rtol=0, atol=1e-9):
+            return None
+        return self.values[k]
+
+
+@dataclass(frozen=True, eq=False)
+class DCAL:
+    """Desired compensation adaptation law (Table 7.2.1):
+
+    r = ė + e                                                (7.2.6)
+    τ = Y_d φ̂ + k_v r + k_p e + k_a ‖e‖² r                  (7.2.5),  Y_d = Y(q_d, q̇_d, q̇_d, q̈_d)   (7.2.4)
+    dφ̂/dt = Γ Y_dᵀ r                                         (7.2.7)
+    V = ½ rᵀ M r + ½ k_p eᵀe + ½ φ̃ᵀ Γ⁻¹ φ̃                   (7.2.14)
+
+    Y_d depends only on the desired trajectory, so with `precompute = true` it is tabulated before the run on the
+    simulation grid and read, not evaluated, on line (the point of §7.2). V is non-increasing when the gain conditions
+    (7.2.22), (7.2.25), (7.2.26) hold. `k_v, k_p, k_a` are scalars, as in the book's analysis.
+    """
+
+    model: RobotModel
+    Kv: Any
+    Kp: Any
+    Ka: Any
+    Gamma: Any
+    phi_hat0: Any
+    precompute: bool = False
+    table: DesiredRegressorTable | None = field(default=None, metadata={"internal": True})
+
+    def __post_init__(self) -> None:
+        for name in ("Kv", "Kp", "Ka"):
+            object.__setattr__(self, name, as_scalar(getattr(self, name), f"controller.{name}", positive=True))
+        object.__setattr__(self, "Gamma", as_gain(self.Gamma, self.model.p, "controller.Gamma"))
+        if not isinstance(self.precompute, bool):
+            raise ConfigError("controller.precompute", f"expected true or false, got {self.precompute!r}")
+        estimate(self)
+
+    @cached_property
+    def _Gamma_inv(self) -> Array:
+        return np.linalg.inv(self.Gamma)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(f"{name}_hat" for name in self.model.param_names)
+
+    def initial_state(self, q0: Array, dq0: Array) -> Array:
+        return self.phi_hat0.copy()
+
+    def phi_hat(self, x: Array) -> Array:
+        return x
+
+    def prepare(self, trajectory: Any, dt: float, t_final: float) -> DCAL:
+        """With `precompute`, tabulate Y_d at every RK4 stage instant of the run (half steps up to t_final)."""
+        if not self.precompute:
+            return self
+        n_half = 2 * int(np.ceil(t_final / dt - 1e-9)) + 1
+        nbytes = 8.0 * n_half * self.model.n * self.model.p
+        if nbytes > _MAX_TABLE_BYTES:
+            raise ConfigError("controller.precompute", f"the Y_d table would take {nbytes / 1e9:.1f} GB; "
+                              "use precompute = false or a coarser dt")
+        ref = trajectory(0.5 * dt * np.arange(n_half))
+        return replace(self, table=DesiredRegressorTable(0.5 * dt, self._evaluate(ref)))
+
+    def _evaluate(self, ref: Reference) -> Array:
+        return self.model.regressor(ref.q_des, ref.dq_des, ref.dq_des, ref.ddq_des)
+
+    def desired_regressor(self, t: Array, ref: Reference) -> Array:
+        """Y_d(q_d, q̇_d, q̈_d) (7.2.4): from the table when precomputed and `t` is on its grid, else evaluated."""
+        if self.table is not None:
+            Yd = self.table.lookup(t)
+            if Yd is not None:
+                return Yd
+        return self._evaluate(ref)
+
+    def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        e, de = errors(q, dq, ref)
+        return de + e
+
+    def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+        e, de = errors(q, dq, ref)
+        r = de + e
+        Yd = self.desired_regressor(t, ref)
+        tau = matvec(Yd, x) + (self.Kv + self.Ka * (e * e).sum(axis=-1, keepdims=True)) * r + self.Kp * e
+        return tau, matvec(Yd.mT, r) @ self.Gamma.T
+
+    def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
+        """V of (7.2.14) with the true φ."""
+        e, de = errors(q, dq, ref)
+        r = de + e
+        M = self.model.mass_matrix(q, phi)
+        return 0.5 * (r * matvec(M, r)).sum(axis=-1) + 0.5 * self.Kp * (e * e).sum(axis=-1) + 0.5 * quad(
+            phi - x, self._Gamma_inv)
