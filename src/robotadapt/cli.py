@@ -24,6 +24,12 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--t-final", type=float, help="shorthand for --set simulation.t_final=T")
     run.add_argument("--dt", type=float, help="shorthand for --set simulation.dt=DT")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    gains = sub.add_parser("gains", help="estimate ζ1…ζ4 of (7.2.9) and check the gain conditions of §7.2")
+    gains.add_argument("scenario", help="a dcal or repetitive scenario (name or TOML file)")
+    gains.add_argument("--radius", type=float, default=1.0, help="radius of the sampled error ball (default 1)")
+    gains.add_argument("--samples", type=int, default=4000, help="number of sampled (t, e, r) points")
+    gains.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    gains.add_argument("--json", action="store_true", help="print one JSON object")
     return p
 
 
@@ -65,6 +71,30 @@ def _study(scenario, out: Path, no_plots: bool) -> None:  # type: ignore[no-unty
             study(key, group, out / f"study_{key.replace('.', '_')}.png", scenario.name)
 
 
+def _gains(args: argparse.Namespace) -> int:
+    import json
+
+    from .gains import gain_report
+    from .scenarios import load
+    from .validation import as_scalar
+
+    radius = as_scalar(args.radius, "--radius", positive=True)
+    if args.samples < 10:
+        raise ConfigError("--samples", f"need at least 10 samples, got {args.samples}")
+    s = load(args.scenario, args.set).setup
+    report = gain_report(s.controller, s.plant.phi, s.trajectory, s.t_final, radius, args.samples)
+    if args.json:
+        print(json.dumps(report.as_dict()))
+        return 0
+    z = report.zeta
+    print(f"ζ1..ζ4 (estimated over ‖e‖, ‖r‖ ≤ {radius:g}, {report.samples} samples) = "
+          f"{z[0]:.4g}, {z[1]:.4g}, {z[2]:.4g}, {z[3]:.4g}")
+    for eq, c in report.conditions.items():
+        print(f"({eq}) {c['condition']}: {c['gain']:.4g} > {c['bound']:.4g}  {'holds' if c['holds'] else 'FAILS'}")
+    print("all gain conditions hold" if report.all_hold else "some gain conditions fail (for the sampled ball)")
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
     from .scenarios import load
 
@@ -91,6 +121,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "list":
             return _list()
+        if args.command == "gains":
+            return _gains(args)
         return _run(args)
     except ConfigError as exc:
         print(f"robotadapt: error: {exc}", file=sys.stderr)
@@ -98,6 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("robotadapt: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into a reader that stopped early (e.g. `| head`)
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":
