@@ -29,12 +29,14 @@ def _show(value: Any) -> str:
 
 def as_array(value: Any, field: str) -> Array:
     """A finite float64 array, or a ConfigError naming `field`."""
-    if isinstance(value, bool | str | bytes) or value is None:
+    if isinstance(value, bool | np.bool_ | str | bytes) or value is None:
         raise ConfigError(field, f"expected a number or a list of numbers, got {_show(value)}")
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise ConfigError(field, f"expected a number or a list of numbers, got {_show(value)}") from None
+    if np.asarray(value).dtype == bool:
+        raise ConfigError(field, f"expected numbers, got true/false values: {_show(value)}")
     if arr.dtype == object or not np.all(np.isfinite(arr)):
         raise ConfigError(field, f"every entry must be a finite number, got {_show(value)}")
     return arr

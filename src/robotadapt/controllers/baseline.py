@@ -49,7 +49,7 @@ class PD(_Fixed):
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         e, de = errors(q, dq, ref)
-        return e @ self.Kp.T + de @ self.Kv.T, 0.0 * x
+        return e @ self.Kp.T + de @ self.Kv.T, 0.0 * x + 0.0 * q[..., :0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +60,7 @@ class PDGravity(_Fixed):
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         e, de = errors(q, dq, ref)
         comp = self.model.gravity(q, self.phi_hat0) + self.model.friction(dq, self.phi_hat0)
-        return e @ self.Kp.T + de @ self.Kv.T + comp, 0.0 * x
+        return e @ self.Kp.T + de @ self.Kv.T + comp, 0.0 * x + 0.0 * q[..., :0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,4 +72,4 @@ class ComputedTorque(_Fixed):
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         e, de = errors(q, dq, ref)
         u = ref.ddq_des + de @ self.Kv.T + e @ self.Kp.T
-        return matvec(self.model.regressor(q, dq, dq, u), self.phi_hat0), 0.0 * x
+        return matvec(self.model.regressor(q, dq, dq, u), self.phi_hat0), 0.0 * x + 0.0 * q[..., :0]

@@ -43,9 +43,9 @@ class OneLinkArm(RobotModel):
     def regressor(self, q: Array, dq: Array, v: Array, a: Array) -> Array:
         xp = array_namespace(q, dq, v, a)
         cols = [a[..., 0], dq[..., 0]] + ([q[..., 0]] if self.stiffness else [])
-        return matrix(xp, [cols]) + 0.0 * v[..., None]
+        return matrix(xp, [cols]) + 0.0 * (q[..., None] + v[..., None])
 
     def remainder_regressor(self, q: Array, dq: Array) -> Array:
         xp = array_namespace(q, dq)
-        cols = [0.0 * dq[..., 0], dq[..., 0]] + ([q[..., 0]] if self.stiffness else [])
+        cols = [0.0 * q[..., 0], dq[..., 0]] + ([q[..., 0]] if self.stiffness else [])
         return vector(xp, cols)[..., None, :]

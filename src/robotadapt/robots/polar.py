@@ -45,7 +45,7 @@ class PolarArm(RobotModel):
         return vector(xp, [m * self.g * r * xp.cos(th), m * self.g * xp.sin(th)])
 
     def friction(self, dq: Array, phi: Array) -> Array:
-        return phi[..., 1:3] * dq if self.friction_terms else 0.0 * dq
+        return phi[..., 1:3] * dq if self.friction_terms else 0.0 * dq + 0.0 * phi[..., :1]
 
     def regressor(self, q: Array, dq: Array, v: Array, a: Array) -> Array:
         """Y = [[r² a1 + r ṙ v1 + r θ̇ v2 + g r cos θ], [a2 − r θ̇ v1 + g sin θ]] (spec §1.5)."""

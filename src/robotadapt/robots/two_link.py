@@ -57,7 +57,7 @@ class TwoLinkArm(RobotModel):
         return xp.stack([(m1 + m2) * self.g * self.l1 * c1 + g2, g2], axis=-1)
 
     def friction(self, dq: Array, phi: Array) -> Array:
-        return phi[..., 2:4] * dq if self.friction_terms else 0.0 * dq
+        return phi[..., 2:4] * dq if self.friction_terms else 0.0 * dq + 0.0 * phi[..., :1]
 
     def regressor(self, q: Array, dq: Array, v: Array, a: Array) -> Array:
         """Y of spec §1.3 (general two-slot form), plus diag(q̇) friction columns."""
