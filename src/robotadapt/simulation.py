@@ -35,6 +35,7 @@ from .validation import ConfigError, as_scalar, as_vector
 
 Array = Any
 _CHUNK = 2048  # steps whose reference is evaluated in one vectorized call
+_MAX_LOG_BYTES = 4e9
 
 
 @dataclass(frozen=True)
@@ -239,11 +240,16 @@ def simulate(plant: Plant, controller: Controller, trajectory: Trajectory, *, t_
     wall = time.perf_counter()
     if isinstance(integrator, RK4):
         n_steps = int(np.ceil(t_final / integrator.dt - 1e-9))
+        log_bytes = 8.0 * (n_steps // log_every + 1) * z0.size
+        if log_bytes > _MAX_LOG_BYTES:
+            raise ConfigError("simulation.dt", f"{n_steps:.3g} steps would keep a {log_bytes / 1e9:.3g} GB log; "
+                              "use a larger dt or simulation.log_every")
         t, z, status = _rk4(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress, line)
     else:
         t, z, status = _solve_ivp(loop, trajectory, z0, integrator, t_final, max_state)
     wall = time.perf_counter() - wall
-    return _outputs(loop, trajectory, t, z, status, wall, info or {})
+    with np.errstate(all="ignore"):  # a diverged run's last samples may overflow in the recomputed outputs
+        return _outputs(loop, trajectory, t, z, status, wall, info or {})
 
 
 def _outputs(loop: _Loop, trajectory: Trajectory, t: Array, z: Array, status: str, wall: float,

@@ -24,6 +24,7 @@ class ConfigError(ValueError):
 
 def _show(value: Any) -> str:
     text = np.array2string(np.asarray(value), threshold=8) if isinstance(value, np.ndarray) else repr(value)
+    text = " ".join(text.split())  # one line, whatever the shape
     return text if len(text) < 80 else text[:77] + "..."
 
 
@@ -42,8 +43,9 @@ def as_array(value: Any, field: str) -> Array:
     return arr
 
 
-def as_scalar(value: Any, field: str, *, positive: bool = False, nonnegative: bool = False) -> float:
-    """A finite float (optionally > 0 or ≥ 0)."""
+def as_scalar(value: Any, field: str, *, positive: bool = False, nonnegative: bool = False,
+              maximum: float | None = None) -> float:
+    """A finite float (optionally > 0 or ≥ 0, and at most `maximum`)."""
     arr = as_array(value, field)
     if arr.ndim != 0:
         raise ConfigError(field, f"expected a single number, got {_show(value)}")
@@ -52,6 +54,8 @@ def as_scalar(value: Any, field: str, *, positive: bool = False, nonnegative: bo
         raise ConfigError(field, f"must be positive, got {x:g}")
     if nonnegative and not x >= 0:
         raise ConfigError(field, f"must be zero or positive, got {x:g}")
+    if maximum is not None and x > maximum:
+        raise ConfigError(field, f"must be at most {maximum:g}, got {x:g}")
     return x
 
 
@@ -104,3 +108,9 @@ def check_names(given: Sequence[str], known: Sequence[str], section: str) -> Non
         if name not in known:
             raise ConfigError(f"{section}.{name}", f"unknown key; known keys here: {', '.join(sorted(known))}")
 
+
+
+def check_switch(value: Any, field: str) -> None:
+    """Raise unless `value` is a bool (a TOML true/false)."""
+    if not isinstance(value, bool | np.bool_):
+        raise ConfigError(field, f"expected true or false, got {value!r}")

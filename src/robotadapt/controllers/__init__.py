@@ -10,10 +10,12 @@ from .base import (
     SimulationStop,
 )
 from .baseline import PD, ComputedTorque, PDGravity
+from .composite import Composite
 from .inertia_related import InertiaRelated
 
 __all__ = [
     "PD",
+    "Composite",
     "ComputedTorque",
     "Controller",
     "HasFilteredError",

@@ -107,6 +107,12 @@ def errors(q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
     return ref.q_des - q, ref.dq_des - dq
 
 
+def slotine_li_regressor(model: RobotModel, Lam: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+    """(Y, r): r = ė + Λe (6.3.8) and Y(q, q̇, q̇_d + Λe, q̈_d + Λė) (6.3.11), shared by every law with Table 6.3.1's torque."""
+    e, de = errors(q, dq, ref)
+    return model.regressor(q, dq, ref.dq_des + e @ Lam.T, ref.ddq_des + de @ Lam.T), de + e @ Lam.T
+
+
 def quad(x: Array, A: Array) -> Array:
     """xᵀ A x over leading axes."""
     return ((x @ A.T) * x).sum(axis=-1)

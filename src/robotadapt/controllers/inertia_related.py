@@ -9,7 +9,7 @@ from typing import Any
 from .._array import matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from .base import Array, errors, estimate, gains, inverse, quad
+from .base import Array, errors, estimate, gains, inverse, quad, slotine_li_regressor
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,9 +56,7 @@ class InertiaRelated:
 
     def regressor(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         """(Y, r) with the Slotine–Li reference velocity q̇_d + Λe and acceleration q̈_d + Λė (6.3.11)."""
-        e, de = errors(q, dq, ref)
-        r = de + e @ self.Lam.T
-        return self.model.regressor(q, dq, ref.dq_des + e @ self.Lam.T, ref.ddq_des + de @ self.Lam.T), r
+        return slotine_li_regressor(self.model, self.Lam, q, dq, ref)
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         Y, r = self.regressor(t, x, q, dq, ref)

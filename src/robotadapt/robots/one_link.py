@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .._array import array_namespace, matrix, vector
+from ..validation import check_switch
 from .base import Array, RobotModel
 
 
@@ -19,6 +20,9 @@ class OneLinkArm(RobotModel):
     """One revolute joint, inertia `m`, viscous friction `b`, no gravity; optional joint stiffness `k`."""
 
     stiffness: bool = False
+
+    def __post_init__(self) -> None:
+        check_switch(self.stiffness, "robot.stiffness")
 
     @property
     def n(self) -> int:

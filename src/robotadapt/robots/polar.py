@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .._array import array_namespace, matrix, vector
+from ..validation import as_scalar, check_switch
 from .base import Array, RobotModel
 
 
@@ -20,6 +21,10 @@ class PolarArm(RobotModel):
 
     g: float = 9.8
     friction_terms: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "g", as_scalar(self.g, "robot.g", nonnegative=True, maximum=1e3))
+        check_switch(self.friction_terms, "robot.friction_terms")
 
     @property
     def n(self) -> int:

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .._array import array_namespace, matrix
+from ..validation import as_scalar, check_switch
 from .base import Array, RobotModel
 
 
@@ -23,6 +24,12 @@ class TwoLinkArm(RobotModel):
     l2: float = 1.0
     g: float = 9.8
     friction_terms: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("l1", "l2"):
+            object.__setattr__(self, name, as_scalar(getattr(self, name), f"robot.{name}", positive=True, maximum=1e3))
+        object.__setattr__(self, "g", as_scalar(self.g, "robot.g", nonnegative=True, maximum=1e3))
+        check_switch(self.friction_terms, "robot.friction_terms")
 
     @property
     def n(self) -> int:

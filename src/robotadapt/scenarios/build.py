@@ -127,15 +127,6 @@ def build(registry: str, section: Any, name: str, model: RobotModel | None = Non
 
 
 def robot(section: Any) -> RobotModel:
-    """Robot constants are positive numbers, switches are true/false."""
-    if isinstance(section, dict):
-        section = dict(section)
-        for key, value in section.items():
-            if key == "kind" or isinstance(value, bool):
-                continue
-            if key in ("stiffness", "friction_terms"):
-                raise ConfigError(f"robot.{key}", f"expected true or false, got {value!r}")
-            section[key] = as_scalar(value, f"robot.{key}", positive=True)
     return build("robot", section, "robot")
 
 

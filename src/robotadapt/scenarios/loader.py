@@ -130,6 +130,8 @@ def override(data: dict[str, Any], assignment: str) -> None:
     if parts[0] not in SECTIONS:
         raise ConfigError(parts[0], f"unknown section in --set {assignment!r}; sections are {', '.join(SECTIONS)}")
     node = data.setdefault(parts[0], {})
+    if not isinstance(node, dict):
+        raise ConfigError(parts[0], f"must be a table [{parts[0]}], got {node!r}")
     for part in parts[1:-1]:
         node = node.setdefault(part, {})
         if not isinstance(node, dict):
