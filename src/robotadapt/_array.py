@@ -10,7 +10,7 @@ from typing import Any
 import array_api_compat
 import numpy as np
 
-__all__ = ["array_namespace", "matrix", "matvec", "vector"]
+__all__ = ["array_namespace", "matrix", "matvec", "quad", "vector"]
 
 
 def array_namespace(*arrays: Any) -> Any:
@@ -45,3 +45,8 @@ def vector(xp: Any, entries: list[Any]) -> Any:
 def matvec(A: Any, x: Any) -> Any:
     """`A @ x` over leading batch axes: `(..., n, m) × (..., m) → (..., n)`."""
     return (A @ x[..., None])[..., 0]
+
+
+def quad(x: Any, A: Any) -> Any:
+    """xᵀ A x over leading batch axes: `(..., n), (n, n) → (...)`."""
+    return ((x @ A.T) * x).sum(axis=-1)

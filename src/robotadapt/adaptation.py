@@ -16,14 +16,10 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ._array import array_namespace
+from ._array import array_namespace, quad
 from .validation import as_gain, as_scalar
 
 Array = Any
-
-
-def _quad(x: Array, A: Array) -> Array:
-    return ((x @ A.T) * x).sum(axis=-1)
 
 
 class UpdateLaw(Protocol):
@@ -70,7 +66,7 @@ class Gradient:
 
     def lyapunov(self, xa: Array, phi: Array) -> Array:
         """½ φ̃ᵀ Γ⁻¹ φ̃ (6.3.7)."""
-        return 0.5 * _quad(phi - xa, self._Gamma_inv)
+        return 0.5 * quad(phi - xa, self._Gamma_inv)
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,7 +105,7 @@ class LandauPI:
 
     def lyapunov(self, xa: Array, phi: Array) -> Array:
         """½ φ̃_Iᵀ K_I⁻¹ φ̃_I: with ½ rᵀ M r its derivative is −rᵀ K_v r − yᵀ F_p y ≤ 0."""
-        return 0.5 * _quad(phi - xa, self._K_I_inv)
+        return 0.5 * quad(phi - xa, self._K_I_inv)
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,4 +155,4 @@ class SwitchingSigma:
         return y @ self.Gamma.T - self.sigma(xa)[..., None] * leak
 
     def lyapunov(self, xa: Array, phi: Array) -> Array:
-        return 0.5 * _quad(phi - xa, self._Gamma_inv)
+        return 0.5 * quad(phi - xa, self._Gamma_inv)

@@ -72,12 +72,11 @@ class _Loop:
     torque they just applied (no algebraic loop: their torque does not depend on q̈)."""
 
     plant: Plant
-    controller: Controller
+    controller: Controller | NeedsAcceleration
     n: int
 
-    @property
-    def needs_acceleration(self) -> bool:
-        return isinstance(self.controller, NeedsAcceleration)
+    def __post_init__(self) -> None:  # a protocol check costs microseconds: once, not per evaluation
+        object.__setattr__(self, "needs_acceleration", isinstance(self.controller, NeedsAcceleration))
 
     def split(self, z: Array) -> tuple[Array, Array, Array]:
         n = self.n
@@ -204,7 +203,7 @@ def _solve_ivp(loop: _Loop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final
     return t, z, "ok"
 
 
-def simulate(plant: Plant, controller: Controller, trajectory: Trajectory, *, t_final: float,
+def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajectory: Trajectory, *, t_final: float,
              integrator: RK4 | SolveIVP | None = None, q0: Any = None, dq0: Any = None, x0: Any = None,
              log_every: int = 1, max_state: float = 1e6, progress: bool = False,
              info: dict[str, Any] | None = None) -> SimulationResult:

@@ -11,10 +11,15 @@ from .base import (
 )
 from .baseline import PD, ComputedTorque, PDGravity
 from .composite import Composite
+from .computed_torque import AdaptiveComputedTorque
+from .dcal import DCAL
 from .inertia_related import InertiaRelated
+from .repetitive import Repetitive
 
 __all__ = [
+    "DCAL",
     "PD",
+    "AdaptiveComputedTorque",
     "Composite",
     "ComputedTorque",
     "Controller",
@@ -25,5 +30,6 @@ __all__ = [
     "InertiaRelated",
     "NeedsAcceleration",
     "PDGravity",
+    "Repetitive",
     "SimulationStop",
 ]

@@ -113,11 +113,6 @@ def slotine_li_regressor(model: RobotModel, Lam: Array, q: Array, dq: Array, ref
     return model.regressor(q, dq, ref.dq_des + e @ Lam.T, ref.ddq_des + de @ Lam.T), de + e @ Lam.T
 
 
-def quad(x: Array, A: Array) -> Array:
-    """xᵀ A x over leading axes."""
-    return ((x @ A.T) * x).sum(axis=-1)
-
-
 def freeze(obj: Any, **values: Any) -> None:
     """Set validated fields on a frozen dataclass from its `__post_init__`."""
     for name, value in values.items():

@@ -8,11 +8,11 @@ from typing import Any
 
 import numpy as np
 
-from .._array import matvec
+from .._array import matvec, quad
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar
-from .base import Array, errors, estimate, quad
+from .base import Array, errors, estimate
 
 _MAX_TABLE_BYTES = 2e9
 

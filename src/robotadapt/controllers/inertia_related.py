@@ -6,10 +6,10 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
-from .._array import matvec
+from .._array import matvec, quad
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from .base import Array, errors, estimate, gains, inverse, quad, slotine_li_regressor
+from .base import Array, errors, estimate, gains, inverse, slotine_li_regressor
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,188 @@
+"""Adaptive computed-torque controller of Craig, Hsu & Sastry (spec §2.2, Table 6.2.1).
+
+The update law needs the measured joint acceleration q̈ and the inverse of the estimated mass matrix M̂(q), so the
+controller implements :class:`~robotadapt.controllers.base.NeedsAcceleration` (the simulator hands it the plant's q̈
+for the torque it just applied; the torque itself does not need q̈) and stops the run with
+:class:`~robotadapt.controllers.base.SimulationStop` when M̂ loses definiteness. An optional box projection of φ̂ keeps
+M̂ invertible (spec §2.2 "Projection").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from scipy.linalg import solve_continuous_lyapunov
+
+from .._array import matvec, quad
+from ..robots.base import RobotModel
+from ..trajectories import Reference
+from ..validation import ConfigError, as_gain, as_vector
+from .base import Array, SimulationStop, errors, estimate, freeze, gains, inverse
+
+
+@dataclass(frozen=True, eq=False)
+class AdaptiveComputedTorque:
+    """Adaptive computed torque (Table 6.2.1).
+
+    τ = M̂(q)(q̈_d + K_v ė + K_p e) + V̂_m q̇ + Ĝ + F̂ = Y(q, q̇, q̇, q̈_d + K_v ė + K_p e) φ̂   (6.2.5)
+    ẋ = A x + B M̂⁻¹ W φ̃,  x = [e; ė],  A = [[0, I], [−K_p, −K_v]],  B = [0; I]             (6.2.10)
+    dφ̂/dt = Γ Wᵀ(q, q̇, q̈) M̂⁻¹(q) E1,  E1 = Bᵀ P x = P12ᵀ e + P22 ė                       (6.2.19)
+    V = xᵀ P x + φ̃ᵀ Γ⁻¹ φ̃,  AᵀP + PA = −Q,  dV/dt = −xᵀ Q x                   (6.2.11), (6.2.16), (6.2.18)
+
+    with W(q, q̇, q̈) = Y(q, q̇, q̇, q̈) the plain regressor (6.2.3). The controller state (called x in the code, not to
+    be confused with the book's x = [e; ė]) is φ̂.
+
+    Parameters
+    ----------
+    model : RobotModel
+        The regressor's structure; its parameters are the estimate φ̂.
+    Kp, Kv : scalar, list or (n, n) array
+        Servo gains, symmetric positive definite (a scalar means k·I, a list a diagonal).
+    Gamma : scalar, list or (p, p) array
+        Adaptation gain Γ, symmetric positive definite.
+    phi_hat0 : (p,) array
+        Initial estimate φ̂(0).
+    Q, P : (2n, 2n) array, optional
+        The Lyapunov pair of (6.2.16); give at most one. From `Q`, P solves AᵀP + PA = −Q; a given `P` must make
+        Q = −(AᵀP + PA) positive definite. With neither, scalar gains K_p = k_p I, K_v = k_v I take the book's
+        P = [[(k_p + k_v/2) I, ½ I], [½ I, I]] (Example 6.2.2; then Q = diag(k_p I, (2k_v − 1) I), which needs
+        k_v > ½, spec §2.3) and other gains Q = I. `lyapunov_pair` gives the (P, Q) in use.
+    phi_min, phi_max : scalar or (p,) array, optional
+        A box for φ̂ (None: unbounded; `bounds` gives the box with ∓∞). Components of dφ̂/dt that point out of the box
+        at (or beyond) a bound are set to zero, `project` clips the state after each fixed step, and the estimate in
+        use is the state clipped into the box (an RK4 stage may step out of it). With a diagonal Γ and the true φ in
+        the box this keeps dV/dt ≤ −xᵀ Q x. Positive lower masses keep M̂ positive definite for the two-link arm
+        (det M̂ = m̂2 l1² l2² (m̂1 + m̂2 s2²)) and the polar arm (M̂ = diag(m̂ r², m̂), r ≠ 0).
+    """
+
+    model: RobotModel
+    Kp: Any
+    Kv: Any
+    Gamma: Any
+    phi_hat0: Any
+    Q: Any = None
+    P: Any = None
+    phi_min: Any = None
+    phi_max: Any = None
+
+    def __post_init__(self) -> None:
+        n, p = self.model.n, self.model.p
+        gains(self, ("Kp", "Kv"), n)
+        gains(self, ("Gamma",), p)
+        estimate(self)
+        if self.P is not None and self.Q is not None:
+            raise ConfigError("controller.P", "give either P or Q (P is then solved from AᵀP + PA = −Q), not both")
+        given = {k: getattr(self, k) for k in ("P", "Q", "phi_min", "phi_max") if getattr(self, k) is not None}
+        freeze(self, **{k: as_gain(v, 2 * n, f"controller.{k}") if k in ("P", "Q") else as_vector(v, p, f"controller.{k}")
+                        for k, v in given.items()})
+        # The fields keep what was given, so `dataclasses.replace` works; the derived constants are cached properties,
+        # evaluated now so that bad input fails at construction.
+        _ = self.lyapunov_pair, self.bounds
+
+    @cached_property
+    def lyapunov_pair(self) -> tuple[Array, Array]:
+        """(P, Q) with AᵀP + PA = −Q, both symmetric positive definite (6.2.16)."""
+        n = self.model.n
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-self.Kp, -self.Kv]])  # (6.2.10)
+        if self.P is not None:
+            Q = -(A.T @ self.P + self.P @ A)
+            _check_pd(Q, "controller.P", "Q = −(AᵀP + PA) must be positive definite for these Kp, Kv; give "
+                      "controller.Q instead to solve for P")
+            return self.P, Q
+        if self.Q is None and _is_scalar(self.Kp) and _is_scalar(self.Kv):
+            kp, kv, eye = self.Kp[0, 0], self.Kv[0, 0], np.eye(n)
+            if not kv > 0.5:
+                raise ConfigError("controller.Kv", f"the book's default P needs k_v > 1/2 (Q = diag(k_p I, (2k_v − 1) "
+                                  f"I)), got {kv:g}; give controller.Q or controller.P")
+            P = np.block([[(kp + kv / 2) * eye, 0.5 * eye], [0.5 * eye, eye]])
+            return P, np.block([[kp * eye, 0 * eye], [0 * eye, (2 * kv - 1) * eye]])
+        Q = np.eye(2 * n) if self.Q is None else self.Q
+        P = solve_continuous_lyapunov(A.T, -Q)
+        P = 0.5 * (P + P.T)
+        _check_pd(P, "controller.Q", "the solution P of AᵀP + PA = −Q is not positive definite to working precision "
+                  "(badly scaled Kp, Kv?)")
+        return P, Q
+
+    @cached_property
+    def bounds(self) -> tuple[Array, Array]:
+        """(lower, upper) ends of the box for φ̂, −∞ / +∞ where not given."""
+        p = self.model.p
+        lo = np.full(p, -np.inf) if self.phi_min is None else self.phi_min
+        hi = np.full(p, np.inf) if self.phi_max is None else self.phi_max
+        if not np.all(lo < hi):
+            raise ConfigError("controller.phi_max", f"must exceed controller.phi_min entry by entry, got {hi} ≤ {lo}")
+        if not np.all((lo <= self.phi_hat0) & (self.phi_hat0 <= hi)):
+            raise ConfigError("controller.phi_hat0", f"must lie in the box [phi_min, phi_max] = [{lo}, {hi}]")
+        return lo, hi
+
+    @cached_property
+    def _BtP(self) -> Array:
+        """Bᵀ P = [P12ᵀ, P22], shape (n, 2n)."""
+        return self.lyapunov_pair[0][self.model.n :, :]
+
+    @cached_property
+    def _Gamma_inv(self) -> Array:
+        return inverse(self.Gamma)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(f"{name}_hat" for name in self.model.param_names)
+
+    def initial_state(self, q0: Array, dq0: Array) -> Array:
+        return self.phi_hat0.copy()
+
+    def phi_hat(self, x: Array) -> Array:
+        """φ̂: the state clipped into the box (the state itself without bounds)."""
+        return np.clip(x, *self.bounds)
+
+    def project(self, x: Array) -> Array:
+        """Clip the state into the box after each fixed step."""
+        return self.phi_hat(x)
+
+    def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        """E1 = Bᵀ P [e; ė] = P12ᵀ e + P22 ė (6.2.19); ½ e + ė with the book's P."""
+        return np.concatenate(errors(q, dq, ref), axis=-1) @ self._BtP.T
+
+    def torque(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        """τ = Y(q, q̇, q̇, q̈_d + K_v ė + K_p e) φ̂ (6.2.5)."""
+        e, de = errors(q, dq, ref)
+        return matvec(self.model.regressor(q, dq, dq, ref.ddq_des + de @ self.Kv.T + e @ self.Kp.T), self.phi_hat(x))
+
+    def update(self, t: Array, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference) -> Array:
+        """dφ̂/dt = Γ Wᵀ M̂⁻¹ E1 (6.2.19), zero where it points out of the box; SimulationStop if M̂(q) is not PD."""
+        phi_hat = self.phi_hat(x)
+        M_hat = self.model.mass_matrix(q, phi_hat)
+        try:
+            np.linalg.cholesky(M_hat)
+        except np.linalg.LinAlgError:
+            raise SimulationStop(_not_pd(M_hat, phi_hat)) from None
+        W = self.model.regressor(q, dq, dq, ddq)
+        dx = matvec(W.mT, np.linalg.solve(M_hat, self.filtered_error(t, x, q, dq, ref)[..., None])[..., 0]) @ self.Gamma.T
+        lo, hi = self.bounds
+        return np.where(((x <= lo) & (dx < 0)) | ((x >= hi) & (dx > 0)), 0.0, dx)
+
+    def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
+        """V = xᵀ P x + φ̃ᵀ Γ⁻¹ φ̃ (6.2.11) with x = [e; ė] and the true φ."""
+        P = self.lyapunov_pair[0]
+        return quad(np.concatenate(errors(q, dq, ref), axis=-1), P) + quad(phi - self.phi_hat(x), self._Gamma_inv)
+
+
+def _check_pd(S: Array, field: str, what: str) -> None:
+    low = np.linalg.eigvalsh(S).min() if np.all(np.isfinite(S)) else np.nan
+    if not low > 0:
+        raise ConfigError(field, f"{what} (smallest eigenvalue {low:.3g})")
+
+
+def _is_scalar(K: Array) -> bool:
+    return bool(np.array_equal(K, K[0, 0] * np.eye(len(K))))
+
+
+def _not_pd(M_hat: Array, phi_hat: Array) -> str:
+    """The stop message, naming the estimate whose M̂(q) is furthest from positive definite."""
+    low = np.linalg.eigvalsh(M_hat).min(axis=-1)
+    worst = np.broadcast_to(phi_hat, low.shape + phi_hat.shape[-1:]).reshape(-1, phi_hat.shape[-1])[np.argmin(low)]
+    return (f"the estimated mass matrix M̂(q) is no longer positive definite (φ̂ = {np.array2string(worst, precision=4)});"
+            " set controller.phi_min/phi_max to project the estimate")
