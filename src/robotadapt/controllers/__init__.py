@@ -15,6 +15,7 @@ from .computed_torque import AdaptiveComputedTorque
 from .dcal import DCAL
 from .inertia_related import InertiaRelated
 from .repetitive import Repetitive
+from .robust import SignRobust
 
 __all__ = [
     "DCAL",
@@ -31,5 +32,6 @@ __all__ = [
     "NeedsAcceleration",
     "PDGravity",
     "Repetitive",
+    "SignRobust",
     "SimulationStop",
 ]

@@ -59,6 +59,9 @@ REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
 }
 # keys whose value is itself a table with a kind, and the registry it names
 NESTED = {"servo": "servo", "law": "law", "base": "controller"}
+# the field prefix each registry's constructors write in their errors (rewritten to the nested path when nested)
+CANONICAL = {"robot": "robot", "trajectory": "trajectory", "controller": "controller", "servo": "controller.servo",
+             "law": "controller.law"}
 FIRST_ARG = {"model": "model", "n": "n", "p": "p"}
 
 
@@ -119,11 +122,14 @@ def build(registry: str, section: Any, name: str, model: RobotModel | None = Non
             raise ConfigError(f"{name}.{key}", f"missing; kind {kind!r} takes {', '.join(params)}")
     for key in NESTED.keys() & keys.keys():
         keys[key] = build(NESTED[key], keys[key], f"{name}.{key}", model)
-    if first is None:
-        return ctor(**keys)
-    assert model is not None
-    arg = {"model": model, "n": model.n, "p": model.p}[first]
-    return ctor(arg, **keys)
+    args = () if first is None else ({"model": model, "n": model.n, "p": model.p}[first],)  # type: ignore[union-attr]
+    try:
+        return ctor(*args, **keys)
+    except ConfigError as exc:  # "controller.Kv" raised by a nested base is "controller.base.Kv" here
+        root = CANONICAL[registry]
+        if name == root or not (exc.field == root or exc.field.startswith(root + ".")):
+            raise
+        raise ConfigError(name + exc.field[len(root):], exc.reason) from None
 
 
 def robot(section: Any) -> RobotModel:

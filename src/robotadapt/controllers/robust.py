@@ -1,0 +1,101 @@
+"""Torque-based disturbance rejection of Slotine & Li (1985c): an adaptive law plus k_d sgn(r) (spec §7.1–7.2; §6.7).
+
+With an additive bounded disturbance (6.7.1) the Slotine–Li Lyapunov function (6.3.7) only gives
+V̇ = −rᵀK_v r + rᵀT_d (6.7.2): r stays bounded but e no longer goes to zero and φ̂ may drift (Example 6.7.1). A
+switching term larger than the disturbance restores V̇ ≤ −rᵀK_v r (6.7.12) and hence e → 0 (Example 6.7.2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._array import array_namespace
+from ..robots.base import RobotModel
+from ..trajectories import Reference
+from ..validation import ConfigError, as_scalar, as_vector
+from .base import Array, Controller, HasFilteredError, NeedsAcceleration, freeze
+
+# optional parts of the contract (controllers.base) the wrapper has exactly when its base has them
+_DELEGATED = ("lyapunov", "regressor", "project")
+
+
+@dataclass(frozen=True, eq=False)
+class SignRobust:
+    """An adaptive controller `base` with a filtered error r, plus the disturbance-rejecting switching term:
+
+    τ = τ_a + k_d sgn(r),  sgn(r) = [sgn(r_1), …, sgn(r_n)]ᵀ,  sgn(0) = 0           (6.7.6), (6.7.7)
+
+    where τ_a and the update law are the base's, unchanged (Table 6.3.1 for Slotine–Li). With V the base's Lyapunov
+    function (6.3.7) and a plant with disturbance T_d (6.7.1),
+
+    V̇ = −rᵀK_v r + rᵀT_d − Σ_i k_d,i |r_i| ≤ −rᵀK_v r + Σ_i |r_i| (|T_d,i| − k_d,i)   (6.7.9)–(6.7.11)
+
+    so k_d,i > sup_t |T_d,i| (the book's scalar k_d > max_i sup |T_d,i|, (6.7.8)) gives V̇ ≤ −rᵀK_v r (6.7.12):
+    r ∈ L2, e → 0, φ̂ bounded. `kd` is a scalar (the book) or one value per joint, each ≥ 0; `kd = 0` is the base.
+
+    `boundary_layer` ε > 0 replaces sgn(r_i) by sat(r_i/ε) to soften the chattering of the switching torque. This
+    changes the theory (spec §7.2): inside the layer the term is only the linear k_d r_i/ε, so (6.7.11) becomes
+    V̇ ≤ −rᵀK_v r + ε Σ_i sup|T_d,i|² / (4 k_d,i), and only a residual set is guaranteed (the time average of ‖r‖²
+    is O(ε); in practice |r_i| ≲ ε): e no longer goes exactly to zero.
+
+    The state x, φ̂, the filtered error, the Lyapunov function, the regressor (for the passivity integral (6.4.4)) and
+    a projection of the state are the base's: the last three exist on the wrapper exactly when the base has them.
+    """
+
+    model: RobotModel
+    base: Any
+    kd: Any
+    boundary_layer: Any = 0.0
+
+    def __post_init__(self) -> None:
+        base = self.base
+        if isinstance(base, NeedsAcceleration):
+            raise ConfigError("controller.base", f"{type(base).__name__} needs the measured acceleration; the sign term "
+                              "(6.7.6) wraps laws whose torque and update are one map, such as slotine_li")
+        if not (isinstance(base, Controller) and isinstance(base, HasFilteredError)):
+            raise ConfigError("controller.base", "expected an adaptive controller with a filtered error r (such as "
+                              f"slotine_li), got {type(base).__name__}")
+        if base.model is not self.model and (base.model.n, base.model.param_names) != (self.model.n,
+                                                                                        self.model.param_names):
+            raise ConfigError("controller.base", f"the base's model ({base.model.n} joints, parameters "
+                              f"{', '.join(base.model.param_names)}) differs from the robot's ({self.model.n} joints, "
+                              f"{', '.join(self.model.param_names)})")
+        kd = as_vector(self.kd, self.model.n, "controller.kd")
+        if not np.all(kd >= 0):
+            raise ConfigError("controller.kd", f"must be zero or positive (above sup |T_d,i|, (6.7.8)), got {kd.tolist()}")
+        freeze(self, kd=kd, boundary_layer=as_scalar(self.boundary_layer, "controller.boundary_layer",
+                                                     nonnegative=True))
+
+    def __getattr__(self, name: str) -> Any:
+        """The base's optional methods (lyapunov, regressor, project), so that the simulator's protocol checks see the
+        wrapper as having them exactly when the base does."""
+        if name in _DELEGATED:
+            return getattr(self.base, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return self.base.state_names
+
+    def initial_state(self, q0: Array, dq0: Array) -> Array:
+        return self.base.initial_state(q0, dq0)
+
+    def phi_hat(self, x: Array) -> Array:
+        return self.base.phi_hat(x)
+
+    def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        return self.base.filtered_error(t, x, q, dq, ref)
+
+    def switching(self, r: Array) -> Array:
+        """sgn(r) (6.7.7), or sat(r/ε) with a boundary layer ε > 0, componentwise."""
+        xp = array_namespace(r)
+        if self.boundary_layer == 0.0:
+            return xp.sign(r)
+        return xp.clip(r / self.boundary_layer, -1.0, 1.0)
+
+    def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+        tau_a, dx = self.base(t, x, q, dq, ref)
+        return tau_a + self.kd * self.switching(self.filtered_error(t, x, q, dq, ref)), dx
