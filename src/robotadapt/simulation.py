@@ -21,6 +21,7 @@ from .controllers.base import (
     Controller,
     HasDelayLine,
     HasFilteredError,
+    HasInstantEstimate,
     HasLyapunov,
     HasProjection,
     HasRegressor,
@@ -258,7 +259,7 @@ def _outputs(loop: _Loop, trajectory: Trajectory, t: Array, z: Array, status: st
     q, dq, x = loop.split(z)
     ref = trajectory(t)
     tau = loop.torque(t, z, ref)
-    phi_hat = ctrl.phi_hat(x)
+    phi_hat = ctrl.phi_hat_at(t, x, q, dq, ref) if isinstance(ctrl, HasInstantEstimate) else ctrl.phi_hat(x)
     same_model = ctrl.model.param_names == plant.model.param_names
     phi = plant.phi if same_model and phi_hat.shape[-1] == plant.model.p else None
     V = ctrl.lyapunov(t, x, q, dq, ref, plant.phi) if isinstance(ctrl, HasLyapunov) and same_model else None

@@ -14,6 +14,7 @@ from .composite import Composite
 from .computed_torque import AdaptiveComputedTorque
 from .dcal import DCAL
 from .inertia_related import InertiaRelated
+from .passivity import PassivityBased, ServoFilter, pd_servo, pid_servo, state_space_servo
 from .repetitive import Repetitive
 from .robust import SignRobust
 
@@ -31,7 +32,12 @@ __all__ = [
     "InertiaRelated",
     "NeedsAcceleration",
     "PDGravity",
+    "PassivityBased",
     "Repetitive",
     "SignRobust",
+    "pd_servo",
+    "pid_servo",
+    "state_space_servo",
+    "ServoFilter",
     "SimulationStop",
 ]

@@ -97,6 +97,12 @@ class SimulationStop(RuntimeError):
 
 
 @runtime_checkable
+class HasInstantEstimate(Protocol):
+    def phi_hat_at(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        """The φ̂ the torque uses when it depends on the signals too (Landau's PI law: φ̂_I + F_p Zᵀ r, (6.4.20))."""
+
+
+@runtime_checkable
 class HasFilteredError(Protocol):
     def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         """The filtered tracking error r the controller drives to zero."""
