@@ -395,3 +395,15 @@ def test_leading_axes_broadcast_against_each_other(kind):
         np.testing.assert_allclose(M[i, j], arm.mass_matrix(q[j], phi[i, 0]), rtol=1e-13)
         np.testing.assert_allclose(tau[i, j], arm.inverse_dynamics(q[j], dq[j], ddq[j], phi[i, 0]), rtol=1e-12,
                                    atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["two-link", "polar", "one-link"])
+def test_generic_remainder_regressor_matches_the_closed_form(kind):
+    """The base class's finite-difference Y_g (for n-DOF models) agrees with each arm's closed form."""
+    from robotadapt.robots.base import RobotModel
+
+    arm, rng = ARMS[kind], np.random.default_rng(11)
+    args = random_args(arm, (6,), rng)
+    q, dq = args["q"], 3 * args["dq"]
+    np.testing.assert_allclose(RobotModel.remainder_regressor(arm, q, dq), arm.remainder_regressor(q, dq),
+                               rtol=1e-7, atol=1e-7)

@@ -26,6 +26,11 @@ REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
         "one_link": ("robots.one_link:OneLinkArm", None),
         "two_link": ("robots.two_link:TwoLinkArm", None),
         "polar": ("robots.polar:PolarArm", None),
+        "planar": ("robots.symbolic:planar_arm", None),
+        "dh": ("robots.symbolic:from_dh_table", None),
+        "puma560": ("robots.symbolic:puma560", None),
+        "urdf": ("robots.pinocchio:PinocchioArm.from_urdf", None),
+        "example_robot": ("robots.pinocchio:PinocchioArm.example", None),
     },
     "trajectory": {
         "sinusoid": ("trajectories:sinusoid", "n"),
@@ -141,7 +146,9 @@ def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray
         raise ConfigError("plant", "expected a table with phi, q0, dq0 and optionally disturbance")
     check_names(list(section), ["phi", "q0", "dq0", "disturbance"], "plant")
     if "phi" not in section:
-        raise ConfigError("plant.phi", f"missing: the true parameters {', '.join(model.param_names)}")
+        if getattr(model, "default_phi", None) is None:
+            raise ConfigError("plant.phi", f"missing: the true parameters {', '.join(model.param_names)}")
+        section = dict(section, phi=model.default_phi)  # the model's own (published or URDF) parameters
     dist = section.get("disturbance")
     if dist is not None:
         if not isinstance(dist, dict):

@@ -1,0 +1,51 @@
+"""`robotadapt` command line: parse, call the library, write files. Bad input exits 2 with one line, no traceback.
+
+Each command is a module of this package with `add_parser(subparsers)` and `main(args) -> exit code`; the commands
+listed in `COMMANDS` whose module exists are offered.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from ..validation import ConfigError
+
+EXIT_BAD_INPUT = 2
+COMMANDS = ("list", "run", "gains", "pe", "figures", "compare", "sweep")
+
+
+def _modules() -> dict[str, object]:
+    found = {}
+    for name in COMMANDS:
+        try:
+            found[name] = importlib.import_module(f"{__name__}.{name}_cmd")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.{name}_cmd":
+                raise
+    return found
+
+
+def _parser(modules: dict[str, object]) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="robotadapt", description="Adaptive control of rigid robot manipulators.")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for module in modules.values():
+        module.add_parser(sub)  # type: ignore[attr-defined]
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    modules = _modules()
+    args = _parser(modules).parse_args(argv)
+    try:
+        return int(modules[args.command].main(args))  # type: ignore[attr-defined]
+    except ConfigError as exc:
+        print(f"robotadapt: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("robotadapt: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # output piped into a reader that stopped early (e.g. `| head`)
+        sys.stderr.close()
+        return 0

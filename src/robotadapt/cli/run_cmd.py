@@ -1,0 +1,53 @@
+"""`robotadapt run`: simulate a scenario; write result.npz, metrics.json, scenario.toml and the figures."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from .common import add_scenario_arguments, overrides, summary
+
+EXIT_DIVERGED = 1
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    run = sub.add_parser("run", help="simulate a scenario; write result.npz, metrics.json and figures")
+    add_scenario_arguments(run)
+    run.add_argument("--out", type=Path, help="output folder (default: results/NAME)")
+    run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+
+
+def _study(scenario: Any, out: Path, no_plots: bool) -> None:
+    """Run the scenario's [study] variants; write study.json and one overlay figure per varied key."""
+    from ..result import atomic_write
+    from ..study import run_study
+    from ..study import summary as study_summary
+
+    runs = run_study(scenario, progress=True)
+    for group in runs.values():
+        for run in group:
+            print(summary(f"  {run.key} = {run.value}", run.result.metrics()))
+    atomic_write(out / "study.json", lambda f: json.dump(study_summary(runs), f, indent=2))
+    if not no_plots:
+        from ..plotting import study
+
+        for key, group in runs.items():
+            study(key, group, out / f"study_{key.replace('.', '_')}.png", scenario.name)
+
+
+def main(args: argparse.Namespace) -> int:
+    from ..scenarios import load
+
+    scenario = load(args.scenario, overrides(args))
+    out = args.out if args.out is not None else Path("results") / scenario.name
+    result = scenario.run(progress=True)
+    result.save(out, scenario.text)
+    if not args.no_plots:
+        result.plot(out, title=scenario.name)
+    print(summary(scenario.name, result.metrics()))
+    if scenario.study:
+        _study(scenario, out, args.no_plots)
+    print(f"wrote {out}/")
+    return 0 if result.ok else EXIT_DIVERGED
