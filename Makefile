@@ -29,8 +29,8 @@ test: $(VENV)/.dev                 ## set up and run the fast test suite
 test-all: $(VENV)/.dev             ## every test, the slow studies included
 	$(BIN)/python -m pytest -q -n 2
 
-bench: $(VENV)/.dev                ## speed studies, ratios against a naive baseline
-	$(BIN)/python benchmarks/run_all.py
+bench: $(VENV)/.dev                ## speed studies, ratios against a naive baseline measured in the same run
+	@for f in benchmarks/bench_*.py; do echo "== $$f"; $(BIN)/python $$f || exit 1; done
 
 clean:
 	rm -rf $(VENV) results build src/*.egg-info

@@ -1,6 +1,6 @@
 """On-line cost of the §7.2 laws: compute time of one control step (torque and state update) for each controller,
 with ratios to Slotine–Li measured in the same run (spec §8–§9: DCAL's Y_d can be tabulated ahead of time, the
-repetitive law needs no regressor at all). Run by `make bench`, or alone: `python benchmarks/online_cost.py`.
+repetitive law needs no regressor at all). Run by `make bench`, or alone: `python benchmarks/bench_online_cost.py`.
 
 One control step is what a real-time loop evaluates per sample: for Slotine–Li and DCAL `ctrl(t, x, q, dq, ref)`; for
 adaptive computed torque `torque` then `update` (with the measured q̈); for the repetitive law `sample` (the delay
