@@ -27,8 +27,9 @@ from ..validation import as_gain, as_vector
 Array = Any
 
 
-@runtime_checkable
-class Controller(Protocol):
+class ControlLaw(Protocol):
+    """What every controller has: its model, its state's layout and initial value, and its estimate."""
+
     model: RobotModel
 
     @property
@@ -40,6 +41,11 @@ class Controller(Protocol):
 
     def phi_hat(self, x: Array) -> Array:
         """The parameter estimate held in (or fixed by) the controller, shape `x.shape[:-1] + (p,)`."""
+
+
+@runtime_checkable
+class Controller(ControlLaw, Protocol):
+    """A control law whose torque and state derivative need only (t, x, q, q̇, ref)."""
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]: ...
 
@@ -58,7 +64,7 @@ class HasRegressor(Protocol):
 
 
 @runtime_checkable
-class NeedsAcceleration(Protocol):
+class NeedsAcceleration(ControlLaw, Protocol):
     """A controller whose update law needs the measured joint acceleration (Table 6.2.1). Its torque must not."""
 
     def torque(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array: ...
