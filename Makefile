@@ -5,7 +5,7 @@ BIN     := $(VENV)/bin
 PIP     := $(BIN)/python -m pip
 STAMP   := $(VENV)/.stamp
 
-.PHONY: demo test test-all bench lint clean
+.PHONY: demo test test-all bench docs clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -31,6 +31,9 @@ test-all: $(VENV)/.dev             ## every test, the slow studies included
 
 bench: $(VENV)/.dev                ## speed studies, ratios against a naive baseline measured in the same run
 	@for f in benchmarks/bench_*.py; do echo "== $$f"; $(BIN)/python $$f || exit 1; done
+
+docs: $(VENV)/.dev                 ## build the documentation site into site/ (warnings are errors)
+	$(BIN)/mkdocs build --strict
 
 clean:
 	rm -rf $(VENV) results build src/*.egg-info

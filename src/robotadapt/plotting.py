@@ -20,7 +20,8 @@ def _finish(fig: Any, ax: Any, title: str, path: Path) -> Path:
     ax.set_title(title)
     ax.set_xlabel("t (s)")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="best", fontsize="small")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="best", fontsize="small")
     fig.tight_layout()
     atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
     plt.close(fig)
@@ -39,6 +40,8 @@ def tracking_error(res: SimulationResult, path: Path, title: str = "") -> Path:
 def parameters(res: SimulationResult, path: Path, title: str = "") -> Path:
     """φ̂(t), solid, with the true φ dashed in the same colour when known."""
     fig, ax = plt.subplots(figsize=(7, 4))
+    if not res.param_names:
+        ax.text(0.5, 0.5, "this controller estimates no parameters", ha="center", va="center", transform=ax.transAxes)
     for i, name in enumerate(res.param_names):
         (line,) = ax.plot(res.t, res.phi_hat[:, i], label=f"{name} estimate")
         if res.phi is not None:

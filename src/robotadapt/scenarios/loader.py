@@ -122,13 +122,19 @@ def parse_value(text: str) -> Any:
 
 
 def override(data: dict[str, Any], assignment: str) -> None:
-    """Apply one `section.key=value` (any depth: `plant.disturbance.amplitude=2`) to `data` in place."""
+    """Apply one `section.key=value` (any depth: `plant.disturbance.amplitude=2`) to `data` in place; a whole section
+    can be replaced by an inline table: `trajectory={kind = "exponential_step", final = 1, rate = 2}`."""
     key, sep, value = assignment.partition("=")
     parts = key.strip().split(".")
-    if not sep or len(parts) < 2 or not all(parts):
-        raise ConfigError("--set", f"expected section.key=value (e.g. controller.Kv=20), got {assignment!r}")
+    parsed = parse_value(value.strip())
+    if not sep or not all(parts) or (len(parts) < 2 and not isinstance(parsed, dict)):
+        raise ConfigError("--set", "expected section.key=value (e.g. controller.Kv=20) or section={...}, "
+                          f"got {assignment!r}")
     if parts[0] not in SECTIONS:
         raise ConfigError(parts[0], f"unknown section in --set {assignment!r}; sections are {', '.join(SECTIONS)}")
+    if len(parts) == 1:
+        data[parts[0]] = parsed
+        return
     node = data.setdefault(parts[0], {})
     if not isinstance(node, dict):
         raise ConfigError(parts[0], f"must be a table [{parts[0]}], got {node!r}")
@@ -136,7 +142,7 @@ def override(data: dict[str, Any], assignment: str) -> None:
         node = node.setdefault(part, {})
         if not isinstance(node, dict):
             raise ConfigError(".".join(parts[:-1]), f"is a value, not a table, in --set {assignment!r}")
-    node[parts[-1]] = parse_value(value.strip())
+    node[parts[-1]] = parsed
 
 
 def _check_study(data: dict[str, Any]) -> None:
