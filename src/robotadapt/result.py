@@ -85,7 +85,8 @@ class SimulationResult:
     def save(self, directory: str | os.PathLike[str], scenario_text: str | None = None) -> Path:
         """Write `result.npz`, `metrics.json` and (if given) `scenario.toml` into `directory`, each atomically."""
         out = _writable(directory)
-        atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **self.arrays()), binary=True)
+        arrays: dict[str, Any] = self.arrays()
+        atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
         atomic_write(out / "metrics.json", lambda f: json.dump(self.metrics(), f, indent=2))
         if scenario_text is not None:
             atomic_write(out / "scenario.toml", lambda f: f.write(scenario_text))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from types import ModuleType
 
 from ..validation import ConfigError
 
@@ -16,7 +17,7 @@ EXIT_BAD_INPUT = 2
 COMMANDS = ("list", "run", "gains", "pe", "figures", "compare", "sweep")
 
 
-def _modules() -> dict[str, object]:
+def _modules() -> dict[str, ModuleType]:
     found = {}
     for name in COMMANDS:
         try:
@@ -27,11 +28,11 @@ def _modules() -> dict[str, object]:
     return found
 
 
-def _parser(modules: dict[str, object]) -> argparse.ArgumentParser:
+def _parser(modules: dict[str, ModuleType]) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="robotadapt", description="Adaptive control of rigid robot manipulators.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in modules.values():
-        module.add_parser(sub)  # type: ignore[attr-defined]
+        module.add_parser(sub)
     return p
 
 
@@ -39,7 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     modules = _modules()
     args = _parser(modules).parse_args(argv)
     try:
-        return int(modules[args.command].main(args))  # type: ignore[attr-defined]
+        return int(modules[args.command].main(args))
     except ConfigError as exc:
         print(f"robotadapt: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -20,6 +20,10 @@ Array = Any
 class RobotModel(ABC):
     """Abstract rigid manipulator. Subclasses give the closed forms; the dynamics below are shared."""
 
+    #: the model's own parameter values (published, or from its URDF), used when a scenario gives no plant.phi;
+    #: None for the textbook arms, whose parameters the scenario always states
+    default_phi: Any = None
+
     @property
     @abstractmethod
     def n(self) -> int:

@@ -146,7 +146,7 @@ def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray
         raise ConfigError("plant", "expected a table with phi, q0, dq0 and optionally disturbance")
     check_names(list(section), ["phi", "q0", "dq0", "disturbance"], "plant")
     if "phi" not in section:
-        if getattr(model, "default_phi", None) is None:
+        if model.default_phi is None:
             raise ConfigError("plant.phi", f"missing: the true parameters {', '.join(model.param_names)}")
         section = dict(section, phi=model.default_phi)  # the model's own (published or URDF) parameters
     dist = section.get("disturbance")
