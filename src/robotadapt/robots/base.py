@@ -12,7 +12,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import Any
 
-from .._array import array_namespace, matvec
+from .._array import array_namespace, matvec, solve
 
 Array = Any
 
@@ -84,4 +84,4 @@ class RobotModel(ABC):
         """q̈ = M(q)⁻¹ (τ − V_m q̇ − G − F)."""
         xp = array_namespace(q, dq, tau)
         bias = matvec(self.regressor(q, dq, dq, 0.0 * dq), phi)
-        return xp.linalg.solve(self.mass_matrix(q, phi), (tau - bias)[..., None])[..., 0]
+        return solve(xp, self.mass_matrix(q, phi), tau - bias)
