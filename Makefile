@@ -23,6 +23,8 @@ demo: $(VENV)/.core                ## set up and run the flagship example (Examp
 	$(BIN)/robotadapt run example-6.3.1 --out results/example-6.3.1
 
 test: $(VENV)/.dev                 ## set up and run the fast test suite
+	@command -v chromium >/dev/null 2>&1 || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+	  chromium >/dev/null) || echo "chromium not installable here: tests/test_report.py skips the browser test"
 	$(BIN)/ruff check src tests
 	$(BIN)/python -m pytest -q -n 2 -m "not slow"
 

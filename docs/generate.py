@@ -140,6 +140,9 @@ AUDIT = [  # (what is wrong, command-line arguments; FILE is a scenario file wri
     ("missing section", ["run", "FILE:[robot]\nkind = 'two_link'"]),
     ("missing file", ["run", "no/such/file.toml"]),
     ("gain conditions on a law that has none", ["gains", "example-6.3.1"]),
+    ("unknown controller in --controllers", ["compare", "example-6.3.1", "--controllers", "slotine_li,nonesuch"]),
+    ("PE window longer than the horizon", ["pe", "example-6.3.1", "--window", "30"]),
+    ("negative PE window", ["pe", "example-6.3.1", "--window", "-1"]),
 ]
 
 
@@ -167,7 +170,7 @@ def audit_page() -> str:
                 args[1] = str(path)
             err = io.StringIO()
             with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-                code = main([*args, "--out", str(Path(tmp) / "out")] if args[0] == "run" else args)
+                code = main([*args, "--out", str(Path(tmp) / "out")] if args[0] in ("run", "compare") else args)
             message = err.getvalue().strip().replace(tmp, "TMP").replace("|", "\\|")
             shown = " ".join(a if not a.startswith("FILE:") else "FILE" for a in argv)
             rows.append(f"| {what}: `robotadapt {shown}` | {code} | {message} |")

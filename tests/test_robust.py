@@ -23,13 +23,20 @@ from __future__ import annotations
 
 import re
 from functools import cache
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy.integrate import trapezoid
 
-from robotadapt.controllers import PD, HasFilteredError, HasLyapunov, HasProjection, HasRegressor, InertiaRelated
+from robotadapt.controllers import (
+    PD,
+    AdaptiveComputedTorque,
+    HasFilteredError,
+    HasLyapunov,
+    HasProjection,
+    HasRegressor,
+    InertiaRelated,
+)
 from robotadapt.controllers.robust import SignRobust
 from robotadapt.plant import Plant, sinusoidal_disturbance
 from robotadapt.robots import PolarArm, TwoLinkArm
@@ -236,7 +243,7 @@ def test_base_must_match_the_model_and_have_a_filtered_error():
     with pytest.raises(ConfigError, match=r"^controller\.base: .*filtered error"):
         SignRobust(BOOK, sinusoid(2), kd=2.0)
     # a law that needs q̈ (Table 6.2.1) has no single map (τ, dx) to add the sign term to
-    needs_ddq = SimpleNamespace(model=BOOK, torque=lambda *args: None, update=lambda *args: None)
+    needs_ddq = AdaptiveComputedTorque(BOOK, Kp=125, Kv=50, Gamma=500, phi_hat0=[0.85, 2.2])
     with pytest.raises(ConfigError, match=r"^controller\.base: .*acceleration"):
         SignRobust(BOOK, needs_ddq, kd=2.0)
     # another model object with the same joints and parameters is fine (the scenario builder passes the same one)

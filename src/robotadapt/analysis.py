@@ -50,4 +50,7 @@ def metrics(res: SimulationResult) -> dict[str, Any]:
         out["V_initial"] = float(res.V[0])
         out["V_final"] = float(res.V[-1])
         out["lyapunov_max_rel_increase"] = lyapunov_increase(res.V)
+    from .monitors import monitor_metrics
+
+    out.update(monitor_metrics(res, res.monitors))
     return out

@@ -23,7 +23,8 @@ class SimulationResult:
     estimate it holds, `V` the controller's Lyapunov function (None where the theory defines none), `r` its filtered
     error. `phi` is the true parameter vector when the controller's model matches the plant's, else None.
     `status` is ``"ok"`` or ``"diverged at t=… s: reason"``. `passivity` is the running integral ∫₀ᵗ −rᵀ Z φ̃ dσ of
-    (6.4.4) for controllers with a regressor, when the truth is known (Simpson's rule on the logged samples)."""
+    (6.4.4) for controllers with a regressor, when the truth is known (Simpson's rule on the logged samples).
+    `monitors` holds signals that need the controller (robotadapt.monitors.controller_series): V_φ(t), λ_min(P⁻¹(t))."""
 
     t: Array
     q: Array
@@ -43,6 +44,7 @@ class SimulationResult:
     wall_time: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
     passivity: Array | None = None
+    monitors: dict[str, Array] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -80,11 +82,12 @@ class SimulationResult:
             out["phi"] = self.phi
         if self.passivity is not None:
             out["passivity"] = self.passivity
+        out.update(self.monitors)
         return out
 
     def save(self, directory: str | os.PathLike[str], scenario_text: str | None = None) -> Path:
         """Write `result.npz`, `metrics.json` and (if given) `scenario.toml` into `directory`, each atomically."""
-        out = _writable(directory)
+        out = writable_dir(directory)
         arrays: dict[str, Any] = self.arrays()
         atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
         atomic_write(out / "metrics.json", lambda f: json.dump(self.metrics(), f, indent=2))
@@ -96,10 +99,10 @@ class SimulationResult:
         """Write `tracking_error.png`, `parameters.png` and `torques.png` into `directory`."""
         from .plotting import save_figures
 
-        return save_figures(self, _writable(directory), title)
+        return save_figures(self, writable_dir(directory), title)
 
 
-def _writable(directory: str | os.PathLike[str]) -> Path:
+def writable_dir(directory: str | os.PathLike[str]) -> Path:
     out = Path(directory)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -116,6 +119,9 @@ def atomic_write(path: Path, write: Callable[[IO[Any]], Any], binary: bool = Fal
     try:
         with os.fdopen(fd, "wb" if binary else "w") as f:
             write(f)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600: give the file the mode a plain open() would
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

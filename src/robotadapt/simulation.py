@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -29,6 +29,7 @@ from .controllers.base import (
     Prepares,
     SimulationStop,
 )
+from .monitors import controller_series
 from .plant import Plant
 from .result import SimulationResult
 from .trajectories import Reference, Trajectory
@@ -268,9 +269,10 @@ def _outputs(loop: _Loop, trajectory: Trajectory, t: Array, z: Array, status: st
     if isinstance(ctrl, HasRegressor) and phi is not None and t.size > 1:
         Z, r_z = ctrl.regressor(t, x, q, dq, ref)
         passivity = cumulative_simpson(-(r_z * matvec(Z, phi - phi_hat)).sum(axis=-1), x=t, initial=0.0)
-    return SimulationResult(
+    result = SimulationResult(
         t=t, q=q, dq=dq, x=x, q_des=ref.q_des, dq_des=ref.dq_des, ddq_des=ref.ddq_des, tau=tau, V=V, r=r,
         phi_hat=phi_hat, phi=phi, param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
         state_names=ctrl.state_names, status=status,
         wall_time=wall, info=info, passivity=passivity,
     )
+    return replace(result, monitors=controller_series(result, ctrl))
