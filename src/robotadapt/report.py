@@ -16,6 +16,7 @@ import io
 import json
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -378,10 +379,14 @@ def table_text(rows: list[Row]) -> str:
                      for line in cells)
 
 
+def _write_bytes(data: bytes, f: Any) -> None:
+    f.write(data)
+
+
 def _overlay(rows: list[Row], signal: str) -> bytes:
     """One figure, one line per controller: ‖e(t)‖, ‖φ̃(t)‖ (log scale over 12 decades) or ‖τ(t)‖ (over 4)."""
     fig, ax = plt.subplots(figsize=(10, 4.5))
-    colors = plt.get_cmap("tab20").colors
+    colors = [plt.get_cmap("tab20")(i) for i in range(20)]
     top = 0.0
     for i, row in enumerate(rows):
         res = row.result
@@ -447,7 +452,7 @@ def write_comparison(base: Scenario, rows: list[Row], skipped: dict[str, str], o
     out = writable_dir(out)
     figures = {name: _overlay(rows, signal) for name, (signal, _) in OVERLAYS.items()}
     for name, png in figures.items():
-        atomic_write(out / f"{name}.png", lambda f, png=png: f.write(png), binary=True)
+        atomic_write(out / f"{name}.png", partial(_write_bytes, png), binary=True)
     atomic_write(out / "comparison.json", lambda f: json.dump(
         {"scenario": base.name, "rows": [r.metrics for r in rows], "skipped": skipped}, f, indent=2))
     atomic_write(out / "report.html", lambda f: f.write(comparison_html(base, rows, skipped, figures)))

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -74,8 +74,9 @@ class _Loop:
     torque they just applied (no algebraic loop: their torque does not depend on q̈)."""
 
     plant: Plant
-    controller: Controller | NeedsAcceleration
+    controller: Any  # a Controller, or a NeedsAcceleration law (torque, then update with the plant's q̈)
     n: int
+    needs_acceleration: bool = field(init=False)
 
     def __post_init__(self) -> None:  # a protocol check costs microseconds: once, not per evaluation
         object.__setattr__(self, "needs_acceleration", isinstance(self.controller, NeedsAcceleration))
@@ -87,15 +88,15 @@ class _Loop:
     def torque(self, t: Array, z: Array, ref: Reference) -> Array:
         q, dq, x = self.split(z)
         if self.needs_acceleration:
-            return self.controller.torque(t, x, q, dq, ref)  # type: ignore[attr-defined]
+            return self.controller.torque(t, x, q, dq, ref)
         return self.controller(t, x, q, dq, ref)[0]
 
     def __call__(self, t: Array, z: Array, ref: Reference) -> Array:
         q, dq, x = self.split(z)
         if self.needs_acceleration:
-            tau = self.controller.torque(t, x, q, dq, ref)  # type: ignore[attr-defined]
+            tau = self.controller.torque(t, x, q, dq, ref)
             ddq = self.plant.acceleration(t, q, dq, tau)
-            dx = self.controller.update(t, x, q, dq, ddq, ref)  # type: ignore[attr-defined]
+            dx = self.controller.update(t, x, q, dq, ddq, ref)
         else:
             tau, dx = self.controller(t, x, q, dq, ref)
             ddq = self.plant.acceleration(t, q, dq, tau)
@@ -129,7 +130,7 @@ class _DelayLine:
     def sample(self, loop: _Loop, k: int, t: float, z: Array, ref: Reference) -> Array:
         q, dq, x = loop.split(z)
         slot = k % self.buffer.shape[0]
-        x_new, store = loop.controller.sample(t, x, q, dq, ref, self.buffer[slot])  # type: ignore[attr-defined]
+        x_new, store = loop.controller.sample(t, x, q, dq, ref, self.buffer[slot])
         self.buffer[slot] = store
         return np.concatenate([q, dq, x_new], axis=-1)
 

@@ -65,14 +65,15 @@ class Repetitive:
     def prepare(self, trajectory: Any, dt: float, t_final: float) -> Repetitive:
         """Take the period from the trajectory when none is given; check that the trajectory repeats with it (7.2.30)
         and that the step divides it."""
-        own = getattr(trajectory, "period", "unknown")  # a trajectory class without the attribute: trust `period`
-        if own is None:
+        declares = hasattr(trajectory, "period")  # a trajectory class without the attribute: trust `period`
+        own: float | None = trajectory.period if declares else None
+        if declares and own is None:
             raise ConfigError("controller.period", "the desired trajectory is not periodic: the repetitive law needs "
                               "q_d(t) = q_d(t − T) (7.2.30)")
-        period = self.period if self.period is not None else own
-        if period is None or period == "unknown":
+        period: float | None = self.period if self.period is not None else own
+        if period is None:
             raise ConfigError("controller.period", "give controller.period: the trajectory does not say its period")
-        if isinstance(own, float) and abs(period / own - round(period / own)) > 1e-9 * period / own:
+        if own is not None and abs(period / own - round(period / own)) > 1e-9 * period / own:
             raise ConfigError("controller.period", f"T = {period:.10g} s is not a multiple of the trajectory's period "
                               f"{own:.10g} s")
         steps = period / dt
