@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 
 from robotadapt.cli import main
 from robotadapt.scenarios import available, load
+from robotadapt.validation import ConfigError
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -178,3 +179,33 @@ def test_a_huge_link_length_is_not_a_traceback(tmp_path):
     assert code in (1, 2)
     if code == 2:
         assert FIELD.match(err).group(1) == "robot.l1"
+
+
+def test_an_estimate_given_as_a_scale_of_the_truth(tmp_path):
+    """phi_hat0 = {scale = s} starts at s × plant.phi, matched by parameter name; errors name the field."""
+    data = {"robot": {"kind": "two_link"}, "plant": {"phi": [0.8, 2.3]}, "trajectory": {"kind": "sinusoid"},
+            "controller": {"kind": "slotine_li", "Lam": 5.0, "Kv": 10.0, "Gamma": 1.0, "phi_hat0": {"scale": 0.5}},
+            "simulation": {"t_final": 0.01}}
+    path = tmp_path / "s.toml"
+    path.write_text(tomli_w.dumps(data))
+    np.testing.assert_allclose(load(path).run().phi_hat[0], [0.4, 1.15])
+    with pytest.raises(ConfigError, match=r"^controller\.phi_hat0\.gain: unknown key; known keys here: scale"):
+        load(path, ["controller.phi_hat0={gain = 2}"])
+    with pytest.raises(ConfigError, match=r"^controller\.phi_hat0: .*lacks m: "):  # a polar-arm controller
+        load(path, ["robot={kind = 'polar'}", "plant.robot={kind = 'two_link'}"])
+
+
+def test_a_relative_urdf_path_is_relative_to_the_scenario_file(tmp_path):
+    pytest.importorskip("pinocchio")
+    import importlib.metadata
+
+    robots = importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data")
+    (tmp_path / "arms").mkdir()
+    urdf = Path(str(robots)) / "robots/ur_description/urdf/ur5_robot.urdf"
+    (tmp_path / "arms" / "ur5.urdf").write_text(urdf.read_text())
+    data = {"robot": {"kind": "urdf", "path": "arms/ur5.urdf"}, "plant": {},
+            "trajectory": {"kind": "constant", "value": 0.0},
+            "controller": {"kind": "pd_gravity", "Kp": 50.0, "Kv": 10.0}, "simulation": {"t_final": 0.002}}
+    path = tmp_path / "s.toml"
+    path.write_text(tomli_w.dumps(data))
+    assert load(path).setup.plant.model.n == 6

@@ -49,3 +49,12 @@ def test_cli_writes_overlays_and_summary(tmp_path):
 def test_bad_study_names_the_key(tmp_path, study):
     with pytest.raises(ConfigError, match="study.controller"):
         load(_write(tmp_path, BASE | {"study": study}))
+
+
+def test_a_study_over_whole_tables_varies_them(tmp_path):
+    """Values that are tables (a trajectory, a servo) become inline tables in the variant's --set."""
+    study = {"trajectory": [{"kind": "sinusoid", "amplitude": 0.5}, {"kind": "exponential_step", "final": 1.0}]}
+    runs = run_study(load(_write(tmp_path, BASE | {"study": study})))["trajectory"]
+    assert [r.result.ok for r in runs] == [True, True]
+    assert abs(runs[0].result.q_des).max() == pytest.approx(0.5, rel=1e-3)
+    assert runs[1].result.q_des[-1, 0] == pytest.approx(1.0, abs=0.1)

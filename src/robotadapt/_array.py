@@ -46,13 +46,15 @@ def vector(xp: Any, entries: list[Any]) -> Any:
 
 
 def matvec(A: Any, x: Any) -> Any:
-    """`A @ x` over leading batch axes: `(..., n, m) × (..., m) → (..., n)`."""
+    """`A @ x` over leading batch axes: `(..., n, m) × (..., m) → (..., n)`; a shared `(n, m)` matrix is one product."""
+    if A.ndim == 2:
+        return x @ A.T
     return (A @ x[..., None])[..., 0]
 
 
 def quad(x: Any, A: Any) -> Any:
-    """xᵀ A x over leading batch axes: `(..., n), (n, n) → (...)`."""
-    return ((x @ A.T) * x).sum(axis=-1)
+    """xᵀ A x over leading batch axes: `(..., n), (..., n, n) → (...)`."""
+    return (matvec(A, x) * x).sum(axis=-1)
 
 
 def solve(xp: Any, A: Any, b: Any) -> Any:

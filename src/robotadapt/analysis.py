@@ -43,6 +43,11 @@ def metrics(res: SimulationResult) -> dict[str, Any]:
         "final_phi_hat": _list(res.phi_hat[-1]),
         "wall_time_s": res.wall_time,
     }
+    if "tau_commanded" in res.monitors:
+        out["max_abs_commanded_torque"] = _list(np.max(np.abs(res.monitors["tau_commanded"]), axis=0))
+    for key in ("plant", "sampling"):  # the real-world effects and the control period the run had
+        if key in res.info:
+            out[key] = res.info[key]
     if res.phi is not None:
         out["phi_true"] = _list(res.phi)
         out["final_phi_error"] = float(np.linalg.norm(res.phi - res.phi_hat[-1]))

@@ -37,15 +37,32 @@ def tracking_error(res: SimulationResult, path: Path, title: str = "") -> Path:
     return _finish(fig, ax, f"{title} — tracking error".strip(" —"), path)
 
 
+#: above this many parameters one line each is unreadable: the figure shows the relative error instead
+MAX_PARAMETER_LINES = 8
+
+
 def parameters(res: SimulationResult, path: Path, title: str = "") -> Path:
-    """φ̂(t), solid, with the true φ dashed in the same colour when known."""
+    """φ̂(t), solid, with the true φ(t) dashed in the same colour when known; for more than `MAX_PARAMETER_LINES`
+    parameters (n-DOF arms) the relative error ‖φ̃(t)‖ / ‖φ(t)‖ when the truth is known, else ‖φ̂(t)‖."""
+    import numpy as np
+
     fig, ax = plt.subplots(figsize=(7, 4))
+    truth = res.phi_true
     if not res.param_names:
         ax.text(0.5, 0.5, "this controller estimates no parameters", ha="center", va="center", transform=ax.transAxes)
+    elif len(res.param_names) > MAX_PARAMETER_LINES:
+        if truth is not None and res.phi_err is not None:
+            rel = np.linalg.norm(res.phi_err, axis=-1) / np.maximum(np.linalg.norm(truth, axis=-1), 1e-300)
+            ax.semilogy(res.t, rel + 1e-16, label=f"‖φ − φ̂‖ / ‖φ‖ ({len(res.param_names)} parameters)")
+            ax.set_ylabel("relative parameter error")
+        else:
+            ax.plot(res.t, np.linalg.norm(res.phi_hat, axis=-1), label=f"‖φ̂‖ ({len(res.param_names)} parameters)")
+            ax.set_ylabel("‖φ̂‖")
+        return _finish(fig, ax, f"{title} — parameter estimates".strip(" —"), path)
     for i, name in enumerate(res.param_names):
         (line,) = ax.plot(res.t, res.phi_hat[:, i], label=f"{name} estimate")
-        if res.phi is not None:
-            ax.axhline(res.phi[i], color=line.get_color(), linestyle="--", label=f"{name} true")
+        if truth is not None:
+            ax.plot(res.t, truth[:, i], color=line.get_color(), linestyle="--", label=f"{name} true")
     ax.set_ylabel("parameter")
     return _finish(fig, ax, f"{title} — parameter estimates".strip(" —"), path)
 

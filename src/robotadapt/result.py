@@ -61,9 +61,17 @@ class SimulationResult:
         return self.dq_des - self.dq
 
     @property
+    def phi_true(self) -> Array | None:
+        """The true φ at each sample, `(T, p)`, when known: its history when it changed during the run (a payload)."""
+        if self.phi is None:
+            return None
+        return self.monitors.get("phi_true", np.broadcast_to(self.phi, self.phi_hat.shape))
+
+    @property
     def phi_err(self) -> Array | None:
-        """φ̃ = φ − φ̂ when the truth is known."""
-        return None if self.phi is None else self.phi - self.phi_hat
+        """φ̃(t) = φ(t) − φ̂(t) when the truth is known."""
+        truth = self.phi_true
+        return None if truth is None else truth - self.phi_hat
 
     def metrics(self) -> dict[str, Any]:
         """Tracking, torque, parameter and Lyapunov metrics (see :func:`robotadapt.analysis.metrics`)."""

@@ -1,13 +1,18 @@
 """Closing the loop: plant + controller + desired trajectory, integrated in time (DESIGN "Simulation").
 
-State z = [q, q̇, x]. Integrators are option objects: :class:`RK4` (fixed step, default, deterministic, batchable) and
-:class:`SolveIVP` (scipy's error-controlled solvers, tolerances always explicit). A divergence guard stops a run whose
-state is non-finite or exceeds `max_state`; the result keeps everything up to there and says where and why it stopped.
-Outputs (torque, V, r) are recomputed after integration from the pure controller maps, vectorized over time.
+State z = [s, x]: the plant's state s = [q, q̇] (then θ, θ̇ of elastic joints and the motor currents, see
+:mod:`robotadapt.plant`) and the controller's x. Integrators are option objects: :class:`RK4` (fixed step, default,
+deterministic, batchable), :class:`SolveIVP` (scipy's error-controlled solvers, tolerances always explicit) and
+:class:`Sampled` (sampled-data control: the controller at its ticks only, zero-order hold on the torque, the plant by RK4
+between them; :mod:`robotadapt.sampled`). A divergence guard stops a run whose state is non-finite or exceeds
+`max_state`; the result keeps everything up to there and says where and why it stopped. In continuous time, outputs
+(torque, V, r) are recomputed after integration from the pure controller maps, vectorized over time; a sampled run logs
+the torque it applied.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -30,7 +35,7 @@ from .controllers.base import (
     SimulationStop,
 )
 from .monitors import controller_series
-from .plant import Plant
+from .plant import Plant, same_model
 from .result import SimulationResult
 from .trajectories import Reference, Trajectory
 from .validation import ConfigError, as_scalar, as_vector
@@ -68,45 +73,115 @@ class SolveIVP:
             object.__setattr__(self, name, as_scalar(getattr(self, name), f"simulation.{name}", positive=True))
 
 
+DISCRETIZATIONS = ("euler", "hold")
+_MAX_SUBSTEPS = 10**6
+
+
+@dataclass(frozen=True)
+class Sampled:
+    """Sampled-data control: the controller runs only at t_k = k·Ts (`control_period` Ts, s) and its torque is held
+    over [t_k, t_k + Ts) (zero-order hold); the plant is integrated by RK4 with the step `dt` = Ts/m, m whole (default:
+    the largest such step ≤ 1 ms). The controller sees the plant through its sensor (:mod:`robotadapt.sensors`; exact
+    samples without one); a controller with acceleration feedback gets q̈_m,k = (q̇_m,k − q̇_m,k−1)/Ts, the backward
+    difference of the velocities it measured (0 at k = 0); a delay line (the repetitive law) holds T/Ts ticks.
+
+    `discretization` is the rule advancing the controller's state x between ticks, from the samples y_k at t_k:
+
+    - ``"euler"``: x_{k+1} = x_k + Ts·f(t_k, x_k, y_k), forward Euler, what `x += Ts * dx` in a control loop does;
+    - ``"hold"``: x_{k+1} = x(t_k + Ts) of dx/dt = f(t_k, x, y_k) with t, y and the reference held at their samples,
+      integrated by RK4 on the plant's sub-steps: the zero-order-hold equivalent (exact for the linear filters of the
+      passivity servo and the composite law, up to RK4's error; the same as Euler when f does not depend on x, as for
+      the gradient law).
+
+    A projection (HasProjection) is applied after each update (each sub-step of "hold"). As Ts → 0 the run tends to
+    the continuous-time one, to first order in Ts.
+    """
+
+    control_period: float
+    dt: Any = None  # the plant's step (s): a float once constructed
+    discretization: str = "euler"
+    substeps: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        Ts = as_scalar(self.control_period, "simulation.control_period", positive=True)
+        if not isinstance(self.discretization, str) or self.discretization not in DISCRETIZATIONS:
+            raise ConfigError("simulation.discretization", f"expected one of {', '.join(DISCRETIZATIONS)}; got "
+                              f"{self.discretization!r}")
+        hint = Ts / max(1, math.ceil(Ts / 1e-3 - 1e-9))
+        if self.dt is None:
+            dt = hint
+        else:
+            dt = as_scalar(self.dt, "simulation.dt", positive=True)
+            if dt > Ts * (1 + 1e-9):
+                raise ConfigError("simulation.dt", f"the plant's step {dt:g} s is longer than the control period "
+                                  f"{Ts:g} s; use dt = Ts/m, e.g. {hint:.6g}")
+            if abs(Ts / dt - round(Ts / dt)) > 1e-6:
+                raise ConfigError("simulation.dt", f"the control period {Ts:g} s is not a whole number of plant "
+                                  f"steps of {dt:g} s; use dt = Ts/m, e.g. {hint:.6g}")
+        substeps = max(1, round(Ts / dt))
+        if substeps > _MAX_SUBSTEPS:
+            raise ConfigError("simulation.dt", f"{substeps:.3g} plant steps per control period; at most "
+                              f"{_MAX_SUBSTEPS:.0e} (use a larger dt)")
+        for name, value in (("control_period", Ts), ("dt", Ts / substeps), ("substeps", substeps)):
+            object.__setattr__(self, name, value)
+
+    def describe(self) -> dict[str, Any]:
+        return {"control_period": self.control_period, "dt": self.dt, "substeps": self.substeps,
+                "discretization": self.discretization}
+
+
 @dataclass(frozen=True, eq=False)
 class _Loop:
-    """The closed-loop vector field dz/dt = f(t, z); controllers that need q̈ get the plant's acceleration for the
-    torque they just applied (no algebraic loop: their torque does not depend on q̈)."""
+    """The closed-loop vector field dz/dt = f(t, z), z = [s, x]; the plant receives the saturated torque. Controllers
+    that need q̈ get the plant's acceleration for the torque they just applied (no algebraic loop: their torque does not
+    depend on q̈)."""
 
     plant: Plant
     controller: Any  # a Controller, or a NeedsAcceleration law (torque, then update with the plant's q̈)
     n: int
     needs_acceleration: bool = field(init=False)
+    m: int = field(init=False)  # the plant's state size, 2n + its extra states
+    rigid: bool = field(init=False)  # no extra plant states: the fast path
 
     def __post_init__(self) -> None:  # a protocol check costs microseconds: once, not per evaluation
         object.__setattr__(self, "needs_acceleration", isinstance(self.controller, NeedsAcceleration))
+        object.__setattr__(self, "m", 2 * self.n + self.plant.n_extra)
+        object.__setattr__(self, "rigid", self.plant.n_extra == 0)
 
     def split(self, z: Array) -> tuple[Array, Array, Array]:
         n = self.n
-        return z[..., :n], z[..., n : 2 * n], z[..., 2 * n :]
+        return z[..., :n], z[..., n : 2 * n], z[..., self.m :]
 
     def torque(self, t: Array, z: Array, ref: Reference) -> Array:
+        """The controller's commanded torque (before the actuator's saturation)."""
         q, dq, x = self.split(z)
         if self.needs_acceleration:
             return self.controller.torque(t, x, q, dq, ref)
         return self.controller(t, x, q, dq, ref)[0]
 
+    def _plant(self, t: Array, z: Array, q: Array, dq: Array, tau: Array) -> tuple[Array, Array]:
+        """(the plant's ds/dt without q̇, q̈) for the commanded torque."""
+        u = self.plant.saturate(tau)
+        if self.rigid:
+            return dq, self.plant.acceleration(t, q, dq, u)
+        ds = self.plant.derivative(t, z[..., : self.m], u)
+        return ds, ds[..., self.n : 2 * self.n]
+
     def __call__(self, t: Array, z: Array, ref: Reference) -> Array:
         q, dq, x = self.split(z)
         if self.needs_acceleration:
             tau = self.controller.torque(t, x, q, dq, ref)
-            ddq = self.plant.acceleration(t, q, dq, tau)
+            head, ddq = self._plant(t, z, q, dq, tau)
             dx = self.controller.update(t, x, q, dq, ddq, ref)
         else:
             tau, dx = self.controller(t, x, q, dq, ref)
-            ddq = self.plant.acceleration(t, q, dq, tau)
-        return np.concatenate([dq, ddq, dx], axis=-1)
+            head, ddq = self._plant(t, z, q, dq, tau)
+        return np.concatenate([head, ddq, dx] if self.rigid else [head, dx], axis=-1)
 
     def project(self, z: Array) -> Array:
         if not isinstance(self.controller, HasProjection):
             return z
-        q, dq, x = self.split(z)
-        return np.concatenate([q, dq, self.controller.project(x)], axis=-1)
+        return np.concatenate([z[..., : self.m], self.controller.project(z[..., self.m :])], axis=-1)
 
 
 def _diverged(z: Array, max_state: float) -> str | None:
@@ -127,12 +202,16 @@ class _DelayLine:
 
     buffer: Array
 
+    def advance(self, controller: Any, k: int, t: float, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        """The controller's state for step (or tick) k, reading and writing slot k mod N."""
+        slot = k % self.buffer.shape[0]
+        x_new, store = controller.sample(t, x, q, dq, ref, self.buffer[slot])
+        self.buffer[slot] = store
+        return x_new
+
     def sample(self, loop: _Loop, k: int, t: float, z: Array, ref: Reference) -> Array:
         q, dq, x = loop.split(z)
-        slot = k % self.buffer.shape[0]
-        x_new, store = loop.controller.sample(t, x, q, dq, ref, self.buffer[slot])
-        self.buffer[slot] = store
-        return np.concatenate([q, dq, x_new], axis=-1)
+        return np.concatenate([z[..., : loop.m], self.advance(loop.controller, k, t, x, q, dq, ref)], axis=-1)
 
 
 def _rk4_step(loop: _Loop, t: float, z: Array, dt: float, r0: Reference, rh: Reference, r1: Reference) -> Array:
@@ -207,14 +286,17 @@ def _solve_ivp(loop: _Loop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final
 
 
 def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajectory: Trajectory, *, t_final: float,
-             integrator: RK4 | SolveIVP | None = None, q0: Any = None, dq0: Any = None, x0: Any = None,
+             integrator: RK4 | SolveIVP | Sampled | None = None, q0: Any = None, dq0: Any = None, x0: Any = None,
              log_every: int = 1, max_state: float = 1e6, progress: bool = False,
              info: dict[str, Any] | None = None) -> SimulationResult:
     """Simulate the closed loop from t = 0 to `t_final` (s).
 
     `q0, dq0` default to zero, `x0` to `controller.initial_state()`. With :class:`RK4`, the state is logged every
-    `log_every` steps; with :class:`SolveIVP` on its own output grid. The run stops early, keeping its partial result,
-    if the state becomes non-finite or exceeds `max_state`.
+    `log_every` steps; with :class:`SolveIVP` on its own output grid; with :class:`Sampled` every `log_every` control
+    ticks. The run stops early, keeping its partial result, if the state becomes non-finite or exceeds `max_state`.
+    The plant's sensor, rate limit and delay act at control ticks: they need :class:`Sampled`. The result's `info`
+    records the plant's real-world effects and its model when it is not the controller's (`plant`), and the sampling
+    (`sampling`).
     """
     n = plant.model.n
     if controller.model.n != n:
@@ -229,51 +311,113 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     if not isinstance(log_every, int) or log_every < 1:
         raise ConfigError("simulation.log_every", f"must be a positive integer, got {log_every!r}")
     plant.check_state(q0)
-    step = integrator.dt
+    sampled = isinstance(integrator, Sampled)
+    _check_plant_step(plant, integrator)
+    step = integrator.control_period if isinstance(integrator, Sampled) else integrator.dt
     if isinstance(controller, Prepares):
-        controller = controller.prepare(trajectory, step, t_final)
+        try:
+            controller = controller.prepare(trajectory, step, t_final)
+        except ConfigError as exc:  # sampled, the controller's step is the control period
+            if not sampled or exc.field != "simulation.dt":
+                raise
+            raise ConfigError("simulation.control_period", f"{exc.reason} (the controller's step here is the "
+                              "control period)") from None
     line = None
     if isinstance(controller, HasDelayLine):
-        if not isinstance(integrator, RK4):
+        if isinstance(integrator, SolveIVP):
             raise ConfigError("simulation.method", "a controller with a delay line (repetitive) needs method = 'rk4'")
         line = _DelayLine(np.array(controller.delay_line(step, q0, dq0), dtype=float))
     loop = _Loop(plant, controller, n)
-    z0 = np.concatenate([q0, dq0, x0])
+    z0 = np.concatenate([plant.initial_state(q0, dq0), x0])
+    info, effects = dict(info or {}), plant.describe()
+    if not same_model(plant.model, controller.model):  # the truth is another model: friction it lacks, a URDF arm
+        effects["model"] = {"class": type(plant.model).__name__, "param_names": list(plant.model.param_names),
+                            "phi": plant.phi.tolist()}
+    if effects:
+        info["plant"] = effects
     wall = time.perf_counter()
-    if isinstance(integrator, RK4):
-        n_steps = int(np.ceil(t_final / integrator.dt - 1e-9))
-        log_bytes = 8.0 * (n_steps // log_every + 1) * z0.size
-        if log_bytes > _MAX_LOG_BYTES:
-            raise ConfigError("simulation.dt", f"{n_steps:.3g} steps would keep a {log_bytes / 1e9:.3g} GB log; "
-                              "use a larger dt or simulation.log_every")
-        t, z, status = _rk4(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress, line)
-    else:
+    logged = None
+    if isinstance(integrator, SolveIVP):
         t, z, status = _solve_ivp(loop, trajectory, z0, integrator, t_final, max_state)
+    else:
+        n_steps = int(np.ceil(t_final / step - 1e-9))
+        width = z0.size + (4 * n if sampled else 0)
+        log_bytes = 8.0 * (n_steps // log_every + 1) * width
+        if log_bytes > _MAX_LOG_BYTES:
+            name = "simulation.control_period" if sampled else "simulation.dt"
+            raise ConfigError(name, f"{n_steps:.3g} steps would keep a {log_bytes / 1e9:.3g} GB log; "
+                              f"use a larger {name.split('.')[1]} or simulation.log_every")
+        if isinstance(integrator, Sampled):
+            from .sampled import integrate
+
+            info["sampling"] = integrator.describe()
+            t, z, status, logged = integrate(loop, trajectory, z0, integrator, n_steps, log_every, max_state,
+                                             progress, line)
+        else:
+            t, z, status = _rk4(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress, line)
     wall = time.perf_counter() - wall
     with np.errstate(all="ignore"):  # a diverged run's last samples may overflow in the recomputed outputs
-        return _outputs(loop, trajectory, t, z, status, wall, info or {})
+        return _outputs(loop, trajectory, t, z, status, wall, info, logged)
+
+
+_RK4_STABLE = 2.5  # |λ dt| inside RK4's stability region (2.78 on the real axis, 2.83 on the imaginary one)
+
+
+def _check_plant_step(plant: Plant, integrator: RK4 | SolveIVP | Sampled) -> None:
+    """Refuse effects that need control ticks in continuous time, and a fixed step too long for the plant's fastest
+    unmodeled dynamics (a motor's electrical pole, a stiff joint), which RK4 would turn into a numerical blow-up."""
+    if plant.needs_sampling and not isinstance(integrator, Sampled):
+        raise ConfigError("simulation.control_period", "the plant's sensor, torque rate limit and delay act at "
+                          "control ticks: set simulation.control_period (sampled-data mode)")
+    rate = plant.fastest_rate
+    if isinstance(integrator, RK4 | Sampled) and rate * integrator.dt > _RK4_STABLE:
+        raise ConfigError("simulation.dt", f"the plant's fastest unmodeled dynamics (rate {rate:.4g} 1/s: motor "
+                          f"L/(R + K_c), joint √(K/J)) need a step dt ≤ {_RK4_STABLE / rate:.3g} s, got "
+                          f"{integrator.dt:g} s")
 
 
 def _outputs(loop: _Loop, trajectory: Trajectory, t: Array, z: Array, status: str, wall: float,
-             info: dict[str, Any]) -> SimulationResult:
-    """Recompute torque, V(t), r(t) and the passivity integral (6.4.4) from the pure maps at the logged instants."""
+             info: dict[str, Any], logged: dict[str, Array] | None = None) -> SimulationResult:
+    """Recompute torque, V(t), r(t) and the passivity integral (6.4.4) from the pure maps at the logged instants.
+
+    `logged` (sampled-data mode) holds the torque applied at each logged tick (`tau`) and what the run recorded
+    besides (`tau_commanded`, `q_measured`, `dq_measured`); in continuous time the applied torque is the saturated
+    command. V, r and the passivity integral are evaluated on the true state, φ̂ from what the controller saw. The
+    truth is the plant's φ(t) when the controller's model is the plant's; the result's `phi` is its value at the last
+    sample, and `monitors["phi_true"]` its history when it changed during the run (a payload attached).
+    """
     ctrl, plant = loop.controller, loop.plant
     q, dq, x = loop.split(z)
     ref = trajectory(t)
-    tau = loop.torque(t, z, ref)
-    phi_hat = ctrl.phi_hat_at(t, x, q, dq, ref) if isinstance(ctrl, HasInstantEstimate) else ctrl.phi_hat(x)
-    same_model = ctrl.model.param_names == plant.model.param_names
-    phi = plant.phi if same_model and phi_hat.shape[-1] == plant.model.p else None
-    V = ctrl.lyapunov(t, x, q, dq, ref, plant.phi) if isinstance(ctrl, HasLyapunov) and same_model else None
+    extras = dict(logged or {})
+    if logged is None:
+        commanded = loop.torque(t, z, ref)
+        tau = plant.saturate(commanded)
+        if plant.actuator is not None:
+            extras["tau_commanded"] = commanded
+    else:
+        tau = extras.pop("tau")
+    q_seen, dq_seen = extras.get("q_measured", q), extras.get("dq_measured", dq)
+    phi_hat = (ctrl.phi_hat_at(t, x, q_seen, dq_seen, ref) if isinstance(ctrl, HasInstantEstimate)
+               else ctrl.phi_hat(x))
+    truth = plant.truth_for(ctrl.model, t)
+    phi = None
+    if truth is not None and phi_hat.shape[-1] == plant.model.p:
+        phi = truth[-1] if truth.ndim == 2 else truth
+    known = phi is not None
+    V = ctrl.lyapunov(t, x, q, dq, ref, truth) if isinstance(ctrl, HasLyapunov) and truth is not None else None
     r = ctrl.filtered_error(t, x, q, dq, ref) if isinstance(ctrl, HasFilteredError) else None
     passivity = None
-    if isinstance(ctrl, HasRegressor) and phi is not None and t.size > 1:
+    if isinstance(ctrl, HasRegressor) and known and t.size > 1:
         Z, r_z = ctrl.regressor(t, x, q, dq, ref)
-        passivity = cumulative_simpson(-(r_z * matvec(Z, phi - phi_hat)).sum(axis=-1), x=t, initial=0.0)
+        passivity = cumulative_simpson(-(r_z * matvec(Z, truth - phi_hat)).sum(axis=-1), x=t, initial=0.0)
+    if known and plant.varies:
+        extras["phi_true"] = truth
+    extras.update(plant.extra_series(z[..., : loop.m]))
     result = SimulationResult(
         t=t, q=q, dq=dq, x=x, q_des=ref.q_des, dq_des=ref.dq_des, ddq_des=ref.ddq_des, tau=tau, V=V, r=r,
         phi_hat=phi_hat, phi=phi, param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
         state_names=ctrl.state_names, status=status,
         wall_time=wall, info=info, passivity=passivity,
     )
-    return replace(result, monitors=controller_series(result, ctrl))
+    return replace(result, monitors={**controller_series(result, ctrl), **extras})

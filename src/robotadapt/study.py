@@ -20,9 +20,16 @@ class StudyRun:
     result: SimulationResult
 
 
+def toml_value(value: Any) -> str:
+    """One TOML value on one line; a table as an inline table (`{kind = "pd", Lam = 5}`)."""
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{tomli_w.dumps({k: 0}).split(' = ')[0]} = {toml_value(v)}" for k, v in value.items()) + "}"
+    return tomli_w.dumps({"v": value})[4:].strip()
+
+
 def assignment(key: str, value: Any) -> str:
     """`key=value` with the value written as TOML (what `--set` parses)."""
-    return f"{key}={tomli_w.dumps({'v': value})[4:].strip()}"
+    return f"{key}={toml_value(value)}"
 
 
 def run_study(scenario: Scenario, progress: bool = False) -> dict[str, list[StudyRun]]:

@@ -7,21 +7,22 @@ from typing import Any
 
 
 def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
-    """The scenario positional and the `--set`, `--t-final`, `--dt` overrides."""
+    """The scenario positional and the `--set`, `--t-final`, `--dt`, `--control-period` overrides."""
     parser.add_argument("scenario", help="a packaged scenario name (see `robotadapt list`) or a TOML file")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="override any scenario field, e.g. --set controller.Kv=20 (repeatable)")
     parser.add_argument("--t-final", type=float, help="shorthand for --set simulation.t_final=T")
     parser.add_argument("--dt", type=float, help="shorthand for --set simulation.dt=DT")
+    parser.add_argument("--control-period", type=float, metavar="T_S",
+                        help="shorthand for --set simulation.control_period=T_S: sampled-data control at 1/T_S Hz")
 
 
 def overrides(args: argparse.Namespace) -> list[str]:
-    """`--set` assignments plus the `--t-final` / `--dt` shorthands."""
+    """`--set` assignments plus the `--t-final` / `--dt` / `--control-period` shorthands."""
     out = list(args.set)
-    if getattr(args, "t_final", None) is not None:
-        out.append(f"simulation.t_final={args.t_final!r}")
-    if getattr(args, "dt", None) is not None:
-        out.append(f"simulation.dt={args.dt!r}")
+    for name in ("t_final", "dt", "control_period"):
+        if getattr(args, name, None) is not None:
+            out.append(f"simulation.{name}={getattr(args, name)!r}")
     return out
 
 
@@ -29,7 +30,17 @@ def fmt(values: list[float]) -> str:
     return "[" + ", ".join(f"{v:.4g}" for v in values) + "]"
 
 
+#: above this many parameters the summary gives the parameter error instead of every estimate
+MAX_SUMMARY_PARAMETERS = 6
+
+
 def summary(name: str, m: dict[str, Any]) -> str:
-    """One line: status, final and RMS error, final estimate."""
-    return (f"{name}: {m['status']}; t = {m['t_end']:.4g} s, final |e| = {fmt(m['final_abs_error'])}, "
-            f"RMS e = {fmt(m['rms_error'])}, final {', '.join(m['param_names'])} = {fmt(m['final_phi_hat'])}")
+    """One line: status, final and RMS error, final estimate (its error ‖φ̃‖ for many parameters)."""
+    head = (f"{name}: {m['status']}; t = {m['t_end']:.4g} s, final |e| = {fmt(m['final_abs_error'])}, "
+            f"RMS e = {fmt(m['rms_error'])}")
+    names = m["param_names"]
+    if len(names) <= MAX_SUMMARY_PARAMETERS:
+        return f"{head}, final {', '.join(names)} = {fmt(m['final_phi_hat'])}"
+    if "final_phi_error" in m:
+        return f"{head}, final ‖φ − φ̂‖ = {m['final_phi_error']:.4g} over {len(names)} parameters"
+    return f"{head}, {len(names)} parameters estimated"

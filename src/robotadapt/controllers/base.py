@@ -20,6 +20,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from .._array import matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import as_gain, as_vector
@@ -122,7 +123,8 @@ def errors(q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
 def slotine_li_regressor(model: RobotModel, Lam: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
     """(Y, r): r = ė + Λe (6.3.8) and Y(q, q̇, q̇_d + Λe, q̈_d + Λė) (6.3.11), shared by every law with Table 6.3.1's torque."""
     e, de = errors(q, dq, ref)
-    return model.regressor(q, dq, ref.dq_des + e @ Lam.T, ref.ddq_des + de @ Lam.T), de + e @ Lam.T
+    Le, Lde = matvec(Lam, e), matvec(Lam, de)
+    return model.regressor(q, dq, ref.dq_des + Le, ref.ddq_des + Lde), de + Le
 
 
 def freeze(obj: Any, **values: Any) -> None:

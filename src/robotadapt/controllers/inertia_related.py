@@ -52,7 +52,7 @@ class InertiaRelated:
 
     def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         e, de = errors(q, dq, ref)
-        return de + e @ self.Lam.T
+        return de + matvec(self.Lam, e)
 
     def regressor(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         """(Y, r) with the Slotine–Li reference velocity q̇_d + Λe and acceleration q̈_d + Λė (6.3.11)."""
@@ -60,8 +60,8 @@ class InertiaRelated:
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         Y, r = self.regressor(t, x, q, dq, ref)
-        tau = matvec(Y, x) + r @ self.Kv.T
-        dx = matvec(Y.mT, r) @ self.Gamma.T
+        tau = matvec(Y, x) + matvec(self.Kv, r)
+        dx = matvec(self.Gamma, matvec(Y.mT, r))
         return tau, dx
 
     def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:

@@ -1,8 +1,18 @@
-"""Robot models: dynamics linear in the parameters, batch-capable, parameters passed in (spec §1)."""
+"""Robot models: dynamics linear in the parameters, batch-capable, parameters passed in (spec §1).
+
+The n-DOF models (`robotadapt.robots.symbolic` from DH tables with sympy, `robotadapt.robots.pinocchio` from URDF) import
+their optional dependency on first use, so they are importable here without it.
+"""
 
 from .base import RobotModel
+from .identifiability import BaseParameterModel, BaseParameters, base_parameters
 from .one_link import OneLinkArm
+from .pinocchio import PinocchioArm
 from .polar import PolarArm
+from .symbolic import SymbolicArm
 from .two_link import TwoLinkArm
 
-__all__ = ["OneLinkArm", "PolarArm", "RobotModel", "TwoLinkArm"]
+__all__ = [
+    "BaseParameterModel", "BaseParameters", "OneLinkArm", "PinocchioArm", "PolarArm", "RobotModel", "SymbolicArm",
+    "TwoLinkArm", "base_parameters",
+]

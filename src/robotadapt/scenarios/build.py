@@ -14,9 +14,12 @@ from typing import Any
 
 import numpy as np
 
+from ..actuators import Actuator, DCMotor
 from ..plant import Plant, sinusoidal_disturbance
 from ..robots import RobotModel
-from ..simulation import RK4, SolveIVP
+from ..sensors import Sensor
+from ..simulation import RK4, Sampled, SolveIVP
+from ..unmodeled import ElasticJoint, Payload
 from ..validation import ConfigError, as_scalar, as_vector, check_names
 
 # kind → "module:attribute" (imported on use, so optional parts cost nothing until named) and what the constructor
@@ -86,7 +89,7 @@ class Setup:
     controller: Any
     trajectory: Any
     t_final: float
-    integrator: RK4 | SolveIVP
+    integrator: RK4 | SolveIVP | Sampled
     q0: np.ndarray
     dq0: np.ndarray
     log_every: int
@@ -141,50 +144,129 @@ def robot(section: Any) -> RobotModel:
     return build("robot", section, "robot")
 
 
+# [plant] keys beyond the true parameters, the initial state and the disturbance: flat keys of the actuator and the
+# sensor (`plant.torque_limit = 5`), the payload, and tables for the true model, elastic joints and motors
+PAYLOAD = {"payload": "mass", "payload_offset": "offset", "payload_time": "time"}
+PLANT_TABLES = {"elastic_joint": ElasticJoint, "motor": DCMotor}
+
+
+def _part(ctor: Callable[..., Any], values: dict[str, Any], n: int) -> Any:
+    """`ctor(n, **values)`, or None when no value is given."""
+    return ctor(n, **values) if values else None
+
+
+def _table(section: dict[str, Any], key: str, n: int) -> Any:
+    """The elastic joint or motor of `[plant.KEY]`, or None."""
+    if key not in section:
+        return None
+    ctor, table = PLANT_TABLES[key], section[key]
+    params = _params(ctor, "n")
+    if not isinstance(table, dict):
+        raise ConfigError(f"plant.{key}", f"expected a table with {', '.join(params)}, got {table!r}")
+    check_names(list(table), list(params), f"plant.{key}")
+    for name, required in params.items():
+        if required and name not in table:
+            raise ConfigError(f"plant.{key}.{name}", f"missing; [plant.{key}] takes {', '.join(params)}")
+    return ctor(n, **table)
+
+
 def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray, np.ndarray]:
+    """The true plant: `robot` (a table like [robot], default the controller's model) with `phi` in its
+    parameterization, `q0`, `dq0`, `disturbance`; a payload (`payload` kg at `payload_offset`, from `payload_time`); the
+    actuator's and the sensor's keys; `[plant.elastic_joint]` and `[plant.motor]` tables."""
     if not isinstance(section, dict):
         raise ConfigError("plant", "expected a table with phi, q0, dq0 and optionally disturbance")
-    check_names(list(section), ["phi", "q0", "dq0", "disturbance"], "plant")
+    actuator_keys, sensor_keys = list(_params(Actuator, "n")), list(_params(Sensor, "n"))
+    check_names(list(section), ["phi", "q0", "dq0", "disturbance", "robot", *PAYLOAD, *actuator_keys, *sensor_keys,
+                                *PLANT_TABLES], "plant")
+    truth = model
+    if "robot" in section:
+        truth = build("robot", section["robot"], "plant.robot")
+        if truth.n != model.n:
+            raise ConfigError("plant.robot", f"has {truth.n} joints, the controller's robot {model.n}")
     if "phi" not in section:
-        if model.default_phi is None:
-            raise ConfigError("plant.phi", f"missing: the true parameters {', '.join(model.param_names)}")
-        section = dict(section, phi=model.default_phi)  # the model's own (published or URDF) parameters
+        if truth.default_phi is None:
+            raise ConfigError("plant.phi", f"missing: the true parameters {', '.join(truth.param_names)}")
+        section = dict(section, phi=truth.default_phi)  # the model's own (published or URDF) parameters
     dist = section.get("disturbance")
     if dist is not None:
         if not isinstance(dist, dict):
             raise ConfigError("plant.disturbance", "expected a table with amplitude, omega, phase, bias")
         check_names(list(dist), ["amplitude", "omega", "phase", "bias"], "plant.disturbance")
         dist = sinusoidal_disturbance(model.n, **dist)
-    phi = as_vector(section["phi"], model.p, "plant.phi", broadcast=False)
+    phi = as_vector(section["phi"], truth.p, "plant.phi", broadcast=False)
     q0 = as_vector(section.get("q0", 0.0), model.n, "plant.q0")
     dq0 = as_vector(section.get("dq0", 0.0), model.n, "plant.dq0")
-    return Plant(model, phi, dist), q0, dq0
+    payload = {arg: section[key] for key, arg in PAYLOAD.items() if key in section}
+    if payload and "mass" not in payload:
+        raise ConfigError("plant.payload", "missing: the payload's mass (kg) for payload_offset / payload_time")
+    n = model.n
+    return Plant(truth, phi, dist, Payload(**payload) if payload else None, _table(section, "elastic_joint", n),
+                 _table(section, "motor", n), _part(Actuator, {k: section[k] for k in actuator_keys if k in section}, n),
+                 _part(Sensor, {k: section[k] for k in sensor_keys if k in section}, n)), q0, dq0
 
 
-def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP, int, float]:
+def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled, int, float]:
+    """t_final, the integrator (RK4, a solve_ivp method, or sampled-data control with `control_period`), log_every,
+    max_state."""
     if not isinstance(section, dict):
         raise ConfigError("simulation", "expected a table with t_final, dt, method")
-    check_names(list(section), ["t_final", "dt", "method", "rtol", "atol", "log_every", "max_state"], "simulation")
+    check_names(list(section), ["t_final", "dt", "method", "rtol", "atol", "log_every", "max_state", "control_period",
+                                "discretization"], "simulation")
     if "t_final" not in section:
         raise ConfigError("simulation.t_final", "missing: the simulated time in seconds")
     t_final = as_scalar(section["t_final"], "simulation.t_final", positive=True)
-    dt = as_scalar(section.get("dt", 1e-3), "simulation.dt", positive=True)
-    if dt > t_final:
-        raise ConfigError("simulation.dt", f"the step {dt:g} s is longer than t_final = {t_final:g} s")
     method = section.get("method", "rk4")
     if not isinstance(method, str):
         raise ConfigError("simulation.method", f"expected a name such as 'rk4' or 'RK45', got {method!r}")
-    if method.lower() == "rk4":
+    integ: RK4 | SolveIVP | Sampled
+    if "control_period" in section:
+        if method.lower() != "rk4":
+            raise ConfigError("simulation.method", "sampled-data control integrates the plant with 'rk4' between "
+                              f"control ticks, got {method!r}")
         if "rtol" in section or "atol" in section:
-            raise ConfigError("simulation.rtol", "tolerances apply to solve_ivp methods, not to the fixed-step 'rk4'")
-        integ: RK4 | SolveIVP = RK4(dt)
+            raise ConfigError("simulation.rtol", "tolerances apply to solve_ivp methods, not to sampled-data control")
+        integ = Sampled(section["control_period"], section.get("dt"), section.get("discretization", "euler"))
+        if integ.control_period > t_final:
+            raise ConfigError("simulation.control_period", f"the control period {integ.control_period:g} s is longer "
+                              f"than t_final = {t_final:g} s")
     else:
-        integ = SolveIVP(method, section.get("rtol", 1e-8), section.get("atol", 1e-10), dt)
+        if "discretization" in section:
+            raise ConfigError("simulation.discretization", "applies to sampled-data control: set "
+                              "simulation.control_period")
+        dt = as_scalar(section.get("dt", 1e-3), "simulation.dt", positive=True)
+        if dt > t_final:
+            raise ConfigError("simulation.dt", f"the step {dt:g} s is longer than t_final = {t_final:g} s")
+        if method.lower() == "rk4":
+            if "rtol" in section or "atol" in section:
+                raise ConfigError("simulation.rtol", "tolerances apply to solve_ivp methods, not to the fixed-step 'rk4'")
+            integ = RK4(dt)
+        else:
+            integ = SolveIVP(method, section.get("rtol", 1e-8), section.get("atol", 1e-10), dt)
     log_every = section.get("log_every", 1)
     if isinstance(log_every, bool) or not isinstance(log_every, int) or log_every < 1:
         raise ConfigError("simulation.log_every", f"expected a positive whole number, got {log_every!r}")
     max_state = as_scalar(section.get("max_state", 1e6), "simulation.max_state", positive=True)
     return t_final, integ, log_every, max_state
+
+
+def _estimate(section: Any, the_plant: Plant, model: RobotModel) -> Any:
+    """`phi_hat0 = {scale = s}` in [controller]: s × the true value of each of the controller's parameters, e.g. 0.7
+    for an estimate 30 % low on all of them (n-DOF arms, whose φ has tens of entries). The true values are the plant's
+    entries of the same names, so the plant's robot may add parameters (friction) the controller's lacks."""
+    value = section.get("phi_hat0") if isinstance(section, dict) else None
+    if not isinstance(value, dict):
+        return section
+    check_names(list(value), ["scale"], "controller.phi_hat0")
+    if "scale" not in value:
+        raise ConfigError("controller.phi_hat0.scale", "missing: phi_hat0 = {scale = 0.7} starts at 0.7 × plant.phi")
+    truth = dict(zip(the_plant.model.param_names, the_plant.phi, strict=True))
+    missing = [name for name in model.param_names if name not in truth]
+    if missing:
+        raise ConfigError("controller.phi_hat0", f"a scale of the true parameters needs the plant's robot to have the "
+                          f"controller's parameters; it lacks {', '.join(missing[:5])}: give phi_hat0 as a list")
+    scale = as_scalar(value["scale"], "controller.phi_hat0.scale")
+    return dict(section, phi_hat0=[scale * float(truth[name]) for name in model.param_names])
 
 
 def setup(data: dict[str, Any]) -> Setup:
@@ -195,6 +277,7 @@ def setup(data: dict[str, Any]) -> Setup:
     model = robot(data["robot"])
     the_plant, q0, dq0 = plant(data["plant"], model)
     t_final, integ, log_every, max_state = simulation(data["simulation"])
-    return Setup(the_plant, build("controller", data["controller"], "controller", model),
+    controller = build("controller", _estimate(data["controller"], the_plant, model), "controller", model)
+    return Setup(the_plant, controller,
                  build("trajectory", data["trajectory"], "trajectory", model), t_final, integ, q0, dq0, log_every,
                  max_state)

@@ -93,6 +93,15 @@ def parse(text: str, origin: str) -> dict[str, Any]:
     return data
 
 
+def _files_relative_to(data: dict[str, Any], folder: Path) -> dict[str, Any]:
+    """A relative `path` of a robot (a URDF file) in a scenario file is relative to that file's folder."""
+    plant = data.get("plant")
+    for section in (data.get("robot"), plant.get("robot") if isinstance(plant, dict) else None):
+        if isinstance(section, dict) and isinstance(section.get("path"), str) and not Path(section["path"]).is_absolute():
+            section["path"] = str(folder / section["path"])
+    return data
+
+
 def read(name_or_path: str | Path) -> tuple[str, dict[str, Any]]:
     """Find a scenario by packaged name or file path and parse it."""
     path = Path(name_or_path)
@@ -103,7 +112,7 @@ def read(name_or_path: str | Path) -> tuple[str, dict[str, Any]]:
             raise ConfigError("scenario", f"no such file: {str(path)!r}") from None
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError("scenario", f"cannot read {str(path)!r}: {exc}") from None
-        return path.stem, parse(text, str(path))
+        return path.stem, _files_relative_to(parse(text, str(path)), path.parent)
     packaged = _packaged()
     if str(name_or_path) not in packaged:
         close = difflib.get_close_matches(str(name_or_path), list(packaged), n=3)

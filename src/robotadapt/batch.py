@@ -1,0 +1,378 @@
+"""N closed loops at once over a leading batch axis (DESIGN "Scale"): Monte-Carlo over the true parameters, studies
+over initial states, initial estimates, Slotine–Li gains or sinusoid parameters, in one vectorized fixed-step RK4 loop.
+
+Each of plant, controller and trajectory is one object shared by every run or a sequence of N objects, one per run,
+each validated when it was constructed. A sequence is merged into one object of the same class whose fields that
+differ between runs are stacked along a leading axis (:func:`stack`); models and controllers broadcast over it, so the
+step is the very code :func:`~robotadapt.simulation.simulate` runs. A field may differ only where the class's math
+broadcasts it (`PER_RUN`); anything else raises :class:`NotBatchable` (simulate those runs one by one).
+
+Per run: a run whose state becomes non-finite or exceeds `max_state`, or whose controller stops (SimulationStop), is
+frozen there with its own status and partial record; the others go on. States are logged every `log_every` steps into
+one `(T, N, d)` array, so memory is bounded by the log; outputs (τ, V, r, passivity) and metrics are recomputed per run
+on demand by the same code as `simulate`, whose results a batch reproduces to round-off.
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, fields, is_dataclass
+from functools import cached_property
+from typing import Any, TypeVar
+
+import numpy as np
+
+from ._array import array_namespace
+from .controllers import DCAL, AdaptiveComputedTorque, Composite, InertiaRelated, PassivityBased, SimulationStop
+from .controllers.base import HasDelayLine, Prepares
+from .plant import Plant, SinusoidalDisturbance
+from .result import SimulationResult
+from .simulation import (
+    _CHUNK,
+    _MAX_LOG_BYTES,
+    RK4,
+    Sampled,
+    SolveIVP,
+    _check_plant_step,
+    _DelayLine,
+    _diverged,
+    _Loop,
+    _outputs,
+    _rk4_step,
+    _take,
+)
+from .trajectories import Reference, SumOfSines
+from .validation import ConfigError, as_array, as_scalar, as_vector
+
+Array = Any
+T = TypeVar("T")
+_REF_BYTES = 32e6  # reference samples evaluated ahead per chunk of steps (all runs together)
+
+# Fields that may differ between the runs of one batch: the class's math broadcasts them over a leading run axis
+# (`phi_hat0` is read only by `initial_state`, which the batch calls per run). Each entry is checked against single
+# runs in tests/test_batch.py.
+PER_RUN: dict[type, tuple[str, ...]] = {
+    Plant: ("phi",),
+    SinusoidalDisturbance: ("amplitude", "phase", "bias"),
+    SumOfSines: ("amplitude", "omega", "phase", "offset"),
+    InertiaRelated: ("Lam", "Kv", "Gamma", "phi_hat0"),
+    AdaptiveComputedTorque: ("phi_hat0",),
+    Composite: ("phi_hat0",),
+    DCAL: ("phi_hat0",),
+    PassivityBased: ("phi_hat0",),
+}
+
+
+class NotBatchable(ConfigError):
+    """The runs differ in something one vectorized loop cannot carry; simulate them one by one."""
+
+
+def _same(a: Any, b: Any) -> bool:
+    if a is b:
+        return True
+    if type(a) is not type(b):
+        return False
+    if is_dataclass(a):
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in fields(a))
+    if isinstance(a, np.ndarray):
+        return a.shape == b.shape and bool(np.array_equal(a, b))
+    return bool(a == b)
+
+
+def stack(items: Sequence[T], name: str) -> T:
+    """One object of the items' class whose fields that differ between the items are stacked along a new leading axis
+    (nested dataclasses field by field). Raises :class:`NotBatchable` unless every differing field is in `PER_RUN`.
+
+    The items were validated when constructed; the merged object is not constructed again (its cached derived
+    constants are dropped, to be recomputed from the stacked fields).
+    """
+    first = items[0]
+    if all(item is first for item in items):
+        return first
+    cls = type(first)
+    if any(type(item) is not cls for item in items) or not is_dataclass(first):
+        raise NotBatchable(name, f"the runs mix {', '.join(sorted({type(i).__name__ for i in items}))}; one batch "
+                           "runs one kind")
+    changes = {}
+    for f in fields(first):
+        values = [getattr(item, f.name) for item in items]
+        if all(_same(v, values[0]) for v in values[1:]):
+            continue
+        if is_dataclass(values[0]):
+            changes[f.name] = stack(values, f"{name}.{f.name}")
+        elif f.name in PER_RUN.get(cls, ()):
+            arrays = [np.asarray(v, dtype=float) for v in values]
+            if any(a.shape != arrays[0].shape for a in arrays):
+                raise NotBatchable(f"{name}.{f.name}", "has different shapes in different runs")
+            changes[f.name] = np.stack(arrays)
+        else:
+            allowed = ", ".join(PER_RUN.get(cls, ())) or "nothing"
+            raise NotBatchable(f"{name}.{f.name}", f"differs between runs; in one batch {cls.__name__} varies only "
+                               f"{allowed} per run")
+    out = copy.copy(first)
+    for klass in cls.__mro__:
+        for key, attr in vars(klass).items():
+            if isinstance(attr, cached_property):
+                vars(out).pop(key, None)
+    for key, value in changes.items():
+        object.__setattr__(out, key, value)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class BatchResult:
+    """The logged states of N runs on one time grid: `z[k, i]` = [s, x] of run i at `t[k]` (plant state s = [q, q̇,
+    …], controller state x), valid for `k < n_logged[i]` (a frozen run's record ends where it stopped). `status[i]` is
+    ``"ok"`` or ``"diverged at t=… s: reason"``, as for :func:`~robotadapt.simulation.simulate`. `wall_time` is the
+    whole batch's; each run's metrics report its share, `wall_time / N`."""
+
+    t: Array
+    z: Array
+    n_logged: Array
+    status: tuple[str, ...]
+    plants: tuple[Plant, ...]
+    controllers: tuple[Any, ...]
+    trajectories: tuple[Any, ...]
+    wall_time: float
+    info: dict[str, Any]
+
+    def __len__(self) -> int:
+        return int(self.z.shape[1])
+
+    @property
+    def ok(self) -> Array:
+        """Per run: True where it ran to the end."""
+        return np.array([s == "ok" for s in self.status])
+
+    def run(self, i: int) -> SimulationResult:
+        """Run `i` as a :class:`~robotadapt.result.SimulationResult` (outputs recomputed as `simulate` does)."""
+        i = range(len(self))[i]
+        k, plant = int(self.n_logged[i]), self.plants[i]
+        info = {**self.info, "run": i} | ({"plant": plant.describe()} if plant.describe() else {})
+        with np.errstate(all="ignore"):
+            return _outputs(_Loop(plant, self.controllers[i], plant.model.n), self.trajectories[i], self.t[:k],
+                            self.z[:k, i], self.status[i], self.wall_time / len(self), info)
+
+    def metrics(self) -> list[dict[str, Any]]:
+        """Per run, the metrics of :meth:`SimulationResult.metrics` (same keys)."""
+        return [self.run(i).metrics() for i in range(len(self))]
+
+
+def _sequence(value: Any) -> tuple[Any, ...]:
+    return tuple(value) if isinstance(value, list | tuple) else (value,)
+
+
+def _leading(value: Any) -> int:
+    return int(np.shape(value)[0]) if np.ndim(value) == 2 else 1
+
+
+def _per_run(value: Any, N: int, width: int, field: str) -> Array:
+    """A `(N, width)` array from one vector (the same for every run) or one row per run."""
+    arr = as_array(value, field)
+    if arr.ndim <= 1:
+        return np.tile(as_vector(arr, width, field), (N, 1))
+    if arr.shape != (N, width):
+        raise ConfigError(field, f"expected {width} numbers or one row of {width} per run ({N}, {width}), "
+                          f"got shape {arr.shape}")
+    return arr.copy()
+
+
+@dataclass(frozen=True, eq=False)
+class _Runs:
+    """The N runs' objects (tuples of N, shared objects repeated) and initial states `(N, ·)`, validated; `s0` the
+    plants' initial states [q, q̇, and any extra plant state]."""
+
+    plants: tuple[Plant, ...]
+    controllers: tuple[Any, ...]
+    trajectories: tuple[Any, ...]
+    q0: Array
+    dq0: Array
+    s0: Array
+    x0: Array
+
+
+def _runs(plant: Any, controller: Any, trajectory: Any, q0: Any, dq0: Any, x0: Any, integrator: RK4) -> _Runs:
+    seqs = _sequence(plant), _sequence(controller), _sequence(trajectory)
+    sizes = {"plant": len(seqs[0]), "controller": len(seqs[1]), "trajectory": len(seqs[2]), "plant.q0": _leading(q0),
+             "plant.dq0": _leading(dq0), "x0": _leading(x0)}
+    N = max(sizes.values())
+    for name, size in sizes.items():
+        if size not in (1, N):
+            raise ConfigError(name, f"has {size} runs where another argument has {N}")
+    plants, controllers, trajectories = (seq * N if len(seq) == 1 else seq for seq in seqs)
+    n = plants[0].model.n
+    if controllers[0].model.n != n or trajectories[0].n != n:
+        raise ConfigError("controller", f"the controller and trajectory must have the plant's {n} joints")
+    q0s = _per_run(0.0 if q0 is None else q0, N, n, "plant.q0")
+    dq0s = _per_run(0.0 if dq0 is None else dq0, N, n, "plant.dq0")
+    runs_of: dict[int, list[int]] = {}
+    for i, p in enumerate(plants):
+        runs_of.setdefault(id(p), []).append(i)
+    for idx in runs_of.values():
+        plants[idx[0]].check_state(q0s[idx])
+        _check_plant_step(plants[idx[0]], integrator)
+    s0 = np.stack([p.initial_state(q0s[i], dq0s[i]) for i, p in enumerate(plants)])
+    if x0 is None:
+        x0s = np.stack([np.asarray(c.initial_state(q0s[i], dq0s[i]), dtype=float) for i, c in enumerate(controllers)])
+    else:
+        x0s = _per_run(x0, N, int(np.shape(x0)[-1]), "x0")
+    return _Runs(plants, controllers, trajectories, q0s, dq0s, s0, x0s)
+
+
+def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: Any, *, t_final: float,
+                   integrator: RK4 | SolveIVP | Sampled | None = None, q0: Any = None, dq0: Any = None, x0: Any = None,
+                   log_every: int = 1, max_state: float = 1e6, progress: bool = False,
+                   info: dict[str, Any] | None = None) -> BatchResult:
+    """Simulate N closed loops from t = 0 to `t_final` (s) with fixed-step RK4, all in one vectorized loop.
+
+    `plant`, `controller`, `trajectory`: one object for every run, or a list of N (one per run; what may differ between
+    them is listed in `PER_RUN`). `q0, dq0`: shape `(n,)` or `(N, n)`, default zero; `x0`: `(s,)` or `(N, s)`, default
+    each run's `controller.initial_state(q0, dq0)`. N is the common length of the per-run arguments. Logging, the
+    divergence guard and the statuses are those of :func:`~robotadapt.simulation.simulate`, per run.
+
+    Examples
+    --------
+    Slotine–Li (Table 6.3.1) on the two-link arm, 100 runs with the true masses drawn ±20 % around (0.8, 2.3) kg:
+
+    >>> arm, rng = TwoLinkArm(), np.random.default_rng(0)
+    >>> phis = np.array([0.8, 2.3]) * rng.uniform(0.8, 1.2, size=(100, 2))
+    >>> res = simulate_batch([Plant(arm, phi) for phi in phis], InertiaRelated(arm, 2.5, 10, 20, [0, 0]),
+    ...                      sinusoid(2), t_final=10, log_every=100)
+    >>> bool(res.ok.all()), res.run(7).metrics()["final_phi_error"] < 1e-3
+    (True, True)
+    """
+    integrator = RK4() if integrator is None else integrator
+    if not isinstance(integrator, RK4):
+        raise NotBatchable("simulation.method", "a batch steps every run with the fixed-step 'rk4' in continuous "
+                           f"time; simulate {type(integrator).__name__} runs one by one")
+    t_final = as_scalar(t_final, "simulation.t_final", positive=True)
+    if isinstance(log_every, bool) or not isinstance(log_every, int) or log_every < 1:
+        raise ConfigError("simulation.log_every", f"must be a positive integer, got {log_every!r}")
+    runs = _runs(plant, controller, trajectory, q0, dq0, x0, integrator)
+    dt, (N, n) = integrator.dt, runs.q0.shape
+    n_steps = int(np.ceil(t_final / dt - 1e-9))
+    log_bytes = 8.0 * (n_steps // log_every + 1) * N * (runs.s0.shape[1] + runs.x0.shape[1])
+    if log_bytes > _MAX_LOG_BYTES:
+        raise ConfigError("simulation.log_every", f"{N} runs of {n_steps} steps would keep a {log_bytes / 1e9:.3g} GB "
+                          "log; log every more steps")
+    controllers = _prepared(runs.controllers, runs.trajectories, dt, t_final)
+    loop = _Loop(stack(runs.plants, "plant"), stack(controllers, "controller"), n)
+    line = None
+    if isinstance(loop.controller, HasDelayLine):
+        line = _DelayLine(np.stack([c.delay_line(dt, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)],
+                                   axis=1))
+
+    def single(i: int) -> _Loop:
+        return _Loop(runs.plants[i], controllers[i], n)
+
+    wall = time.perf_counter()
+    t, z, n_logged, status = _integrate(loop, single, stack(runs.trajectories, "trajectory"),
+                                        np.concatenate([runs.s0, runs.x0], axis=-1), dt, n_steps, log_every,
+                                        max_state, progress, line)
+    return BatchResult(t, z, n_logged, tuple(status), runs.plants, controllers, runs.trajectories,
+                       time.perf_counter() - wall, dict(info or {}))
+
+
+def _prepared(controllers: tuple[Any, ...], trajectories: tuple[Any, ...], dt: float, t_final: float) -> tuple[Any, ...]:
+    """Each run's controller with its tables computed (`Prepares`), once per distinct (controller, trajectory) pair."""
+    if not isinstance(controllers[0], Prepares):
+        return controllers
+    done: dict[tuple[int, int], Any] = {}
+    for c, traj in zip(controllers, trajectories, strict=True):
+        if (id(c), id(traj)) not in done:
+            done[id(c), id(traj)] = c.prepare(traj, dt, t_final)
+    return tuple(done[id(c), id(traj)] for c, traj in zip(controllers, trajectories, strict=True))
+
+
+def _row(ref: Reference, i: int) -> Reference:
+    """Run i's reference from one with a leading run axis of N or 1."""
+    return Reference(*(a[i if a.shape[0] > 1 else 0] for a in ref))
+
+
+def _advance(z: Array, z_new: Array, alive: Array, max_state: float) -> tuple[Array, Array]:
+    """Accept the step for live runs whose new state is finite and within `max_state`; the others keep their state.
+    Returns (next state, runs that stopped now). Pure: no writes into its inputs."""
+    xp = array_namespace(z, z_new)
+    ok = xp.all(xp.isfinite(z_new), axis=-1) & (xp.max(xp.abs(z_new), axis=-1) <= max_state)
+    return xp.where((alive & ok)[:, None], z_new, z), alive & ~ok
+
+
+def _stand_in(z: Array, alive: Array) -> Array:
+    """Frozen runs take a live run's state for the step (the result is discarded), so that they raise nothing."""
+    xp = array_namespace(z)
+    return xp.where(alive[:, None], z, z[xp.argmax(alive)])
+
+
+def _stopped(single: Callable[[int], _Loop], alive: Array, t: float, z: Array, dt: float,
+             refs: tuple[Reference, ...]) -> dict[int, str]:
+    """The live runs whose controller or plant raises on this step, found run by run, with the reason."""
+    out = {}
+    for i in np.flatnonzero(alive):
+        try:
+            _rk4_step(single(int(i)), t, z[i], dt, *(_row(r, int(i)) for r in refs))
+        except (SimulationStop, np.linalg.LinAlgError) as stop:
+            out[int(i)] = str(stop)
+    return out
+
+
+def _integrate(loop: _Loop, single: Callable[[int], _Loop], traj: Any, z0: Array, dt: float, n_steps: int,
+               log_every: int, max_state: float, progress: bool,
+               line: _DelayLine | None) -> tuple[Array, Array, Array, list[str]]:
+    """Fixed-step RK4 of every run from t = 0; returns the logged (t, z), the number of valid samples per run and the
+    statuses. The per-step math (`_rk4_step`, `_advance`, `_stand_in`) writes into no array; the driver around it
+    (logging, statuses, the run-by-run search when a step raises) is host code."""
+    from tqdm import tqdm
+
+    N = z0.shape[0]
+    n_log = n_steps // log_every + 1
+    z_log = np.empty((n_log,) + z0.shape)
+    z_log[0] = z0
+    n_logged = np.full(N, n_log)
+    status = ["ok"] * N
+    alive = np.ones(N, dtype=bool)
+    z, k_log = z0, 1
+    m_max = int(max(1, min(_CHUNK, _REF_BYTES // (48 * N * z0.shape[1]))))
+
+    def stop(why: dict[int, str]) -> None:
+        for i, text in why.items():
+            status[i] = text
+        n_logged[list(why)] = k_log
+        alive[list(why)] = False
+
+    with tqdm(total=n_steps, delay=1.0, disable=not progress, unit="step", leave=False, file=sys.stderr) as bar, \
+            np.errstate(all="ignore"):
+        for k in range(n_steps):
+            j = k % m_max
+            if j == 0:  # the reference at every stage instant of the next m_max steps, in one call
+                ref = traj((dt * (k + 0.5 * np.arange(2 * min(m_max, n_steps - k) + 1)))[:, None])
+                bar.update(min(m_max, n_steps - k))
+            t = k * dt
+            refs = (_take(ref, 2 * j), _take(ref, 2 * j + 1), _take(ref, 2 * j + 2))
+            z_in = z if alive.all() else _stand_in(z, alive)
+            if line is not None:
+                z_in = line.sample(loop, k, t, z_in, refs[0])
+            try:
+                z_new = _rk4_step(loop, t, z_in, dt, *refs)
+            except (SimulationStop, np.linalg.LinAlgError):
+                reasons = _stopped(single, alive, t, z_in, dt, refs)
+                if not reasons:
+                    raise
+                stop({i: f"diverged at t={t:.6g} s: {why}" for i, why in reasons.items()})
+                if not alive.any():
+                    break
+                z_in = _stand_in(z_in, alive)
+                z_new = _rk4_step(loop, t, z_in, dt, *refs)
+            z, now = _advance(z, z_new, alive, max_state)
+            if now.any():
+                stop({int(i): f"diverged at t={t + dt:.6g} s: {_diverged(z_new[i], max_state)}"
+                      for i in np.flatnonzero(now)})
+            if (k + 1) % log_every == 0:
+                z_log[k_log] = z
+                k_log += 1
+            if not alive.any():
+                break
+    T = int(n_logged.max())
+    return dt * (log_every * np.arange(T)), z_log[:T], n_logged, status

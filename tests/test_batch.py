@@ -1,0 +1,229 @@
+"""Batch simulation (`robotadapt.batch`): N closed loops in one vectorized loop reproduce N calls of `simulate`; a run
+that diverges or stops is frozen with its own status and partial record while the others go on; the log bounds memory.
+
+The reference is always the single-run simulator on the same objects: the batch must give the same logged instants,
+states, recomputed outputs (τ, V, r, passivity integral), statuses and metrics, to round-off (1e-12).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from robotadapt.batch import PER_RUN, NotBatchable, simulate_batch, stack
+from robotadapt.controllers import InertiaRelated
+from robotadapt.plant import Plant
+from robotadapt.robots import TwoLinkArm
+from robotadapt.scenarios import load
+from robotadapt.simulation import RK4, SolveIVP, simulate
+from robotadapt.trajectories import sinusoid
+from robotadapt.validation import ConfigError
+
+ARM = TwoLinkArm()
+PHI = np.array([0.8, 2.3])  # Example 6.3.1
+ARRAYS = ("t", "q", "dq", "x", "tau", "phi_hat", "V", "r", "passivity")
+
+
+def slotine_li(**kw) -> InertiaRelated:
+    gains = {"Lam": 2.5, "Kv": 10.0, "Gamma": 20.0, "phi_hat0": [0.0, 0.0]} | kw
+    return InertiaRelated(ARM, **gains)
+
+
+def assert_same_run(batch_run, single) -> None:
+    """Same status, same logged instants, every array equal to 1e-12, same metrics (wall time apart)."""
+    assert batch_run.status == single.status
+    for name in ARRAYS:
+        a, b = getattr(batch_run, name), getattr(single, name)
+        assert (a is None) == (b is None), name
+        if a is not None:
+            assert a.shape == b.shape, name
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * max(1.0, float(np.abs(b).max(initial=0.0))), err_msg=name)
+    m1, m2 = batch_run.metrics(), single.metrics()
+    for m in (m1, m2):
+        m.pop("wall_time_s")
+    assert m1.keys() == m2.keys()
+    for key, value in m1.items():
+        if value is None or isinstance(value, str | bool | dict) or key == "param_names":
+            assert value == m2[key], key
+        else:
+            np.testing.assert_allclose(value, m2[key], rtol=1e-11, atol=1e-12, err_msg=key)
+
+
+def test_monte_carlo_over_true_parameters_and_initial_states_equals_single_runs():
+    """Example 6.3.1 with the true masses drawn ±30 % and random initial states: every run of the batch is the run
+    `simulate` gives for its own plant and initial state."""
+    rng = np.random.default_rng(3)
+    N = 5
+    phis = PHI * rng.uniform(0.7, 1.3, size=(N, 2))
+    q0, dq0 = rng.normal(scale=0.2, size=(N, 2)), rng.normal(scale=0.5, size=(N, 2))
+    ctrl, traj = slotine_li(), sinusoid(2)
+    batch = simulate_batch([Plant(ARM, phi) for phi in phis], ctrl, traj, t_final=0.6, q0=q0, dq0=dq0, log_every=3)
+    assert len(batch) == N and batch.ok.all()
+    for i in range(N):
+        assert_same_run(batch.run(i), simulate(Plant(ARM, phis[i]), ctrl, traj, t_final=0.6, q0=q0[i], dq0=dq0[i],
+                                               log_every=3))
+    # the runs really differ: the batch did not compute one run N times
+    assert np.ptp(batch.z[-1, :, 4]) > 0.1
+
+
+def test_per_run_slotine_li_gains_and_sinusoids_equal_single_runs():
+    """Λ, K_v, Γ (diagonal, scalar, full SPD), φ̂(0) and the sinusoid's amplitude, frequency, phase and offset all differ
+    per run: one merged controller and one merged trajectory, stacked along the run axis."""
+    N = 4
+    G_full = np.array([[30.0, 5.0], [5.0, 10.0]])
+    ctrls = [slotine_li(Lam=[2.5, 1.0 + i], Kv=5.0 + 3 * i, Gamma=G_full if i == 2 else 10.0 + i,
+                        phi_hat0=[0.2 * i, 1.0]) for i in range(N)]
+    trajs = [sinusoid(2, amplitude=[1.0, 0.5 + 0.1 * i], omega=1.0 + 0.2 * i, phase=0.1 * i, offset=[0.0, 0.1 * i])
+             for i in range(N)]
+    plant = Plant(ARM, PHI)
+    batch = simulate_batch(plant, ctrls, trajs, t_final=0.5, log_every=5)
+    merged = stack(ctrls, "controller")
+    assert merged.Kv.shape == (N, 2, 2) and merged.Lam.shape == (N, 2, 2) and merged.Gamma.shape == (N, 2, 2)
+    for i in range(N):
+        assert_same_run(batch.run(i), simulate(plant, ctrls[i], trajs[i], t_final=0.5, log_every=5))
+
+
+SCENARIOS = {  # packaged scenarios, one per controller family; overrides keep them short and running
+    "example-6.2.1": [],  # computed torque, fixed estimates
+    "example-6.2.2": ["controller.phi_min=0.1", "controller.phi_max=10"],  # adaptive computed torque, projection
+    "example-6.5.1": [],  # Slotine–Li, one-link arm, exponential step
+    "example-6.6.3": [],  # composite (state φ̂, P, τ_f, Z)
+    "example-6.7.2": [],  # sign-robust on a Slotine–Li base
+    "example-7.2.1": [],  # DCAL, Y_d tabulated
+    "problem-7.2-2": ["controller.precompute=false"],  # DCAL on the polar arm, Y_d on line
+    "problem-6.4-1": [],  # passivity-based, PID servo
+    "sigma-modification": [],  # passivity-based, σ-modification
+    "example-7.2.2": [],  # repetitive: the delay line, one per run
+}
+
+
+@pytest.mark.parametrize("name", list(SCENARIOS))
+def test_every_controller_family_batches_over_plant_parameters_and_initial_states(name):
+    """Per run: true φ (±20 %), q0, and φ̂(0) where the controller class lists it in PER_RUN."""
+    s = load(name, SCENARIOS[name]).setup
+    N, dt = 3, s.integrator.dt
+    t_final = 150 * dt
+    scale = np.array([1.0, 1.2, 0.8])
+    plants = [Plant(s.plant.model, s.plant.phi * k, s.plant.disturbance) for k in scale]
+    q0 = s.q0 + 0.05 * np.arange(N)[:, None]
+    ctrls = [s.controller] * N
+    if "phi_hat0" in PER_RUN.get(type(s.controller), ()):
+        ctrls = [dataclasses.replace(s.controller, phi_hat0=s.controller.phi_hat0 * k) for k in scale]
+    batch = simulate_batch(plants, ctrls, s.trajectory, t_final=t_final, integrator=s.integrator, q0=q0, dq0=s.dq0,
+                           log_every=10)
+    for i in range(N):
+        single = simulate(plants[i], ctrls[i], s.trajectory, t_final=t_final, integrator=s.integrator, q0=q0[i],
+                          dq0=s.dq0, log_every=10)
+        assert single.ok
+        assert_same_run(batch.run(i), single)
+
+
+def test_plants_with_more_state_than_q_and_dq_batch_too():
+    """Elastic joints (θ, θ̇ per joint) and a torque limit (the applied torque saturates): the plant's own initial
+    state s0 = [q0, q̇0, θ0, θ̇0] per run, per-run true masses, and the same runs as `simulate`."""
+    from robotadapt.actuators import Actuator
+    from robotadapt.unmodeled import ElasticJoint
+
+    joint, limit = ElasticJoint(2, J=0.2, K=400.0, D=2.0), Actuator(2, torque_limit=60.0)
+    plants = [Plant(ARM, PHI * k, elastic_joint=joint, actuator=limit) for k in (1.0, 1.2)]
+    q0 = np.array([[0.0, 0.0], [0.2, -0.1]])
+    batch = simulate_batch(plants, slotine_li(), sinusoid(2), t_final=0.3, q0=q0, log_every=10)
+    assert batch.z.shape[-1] == 4 * 2 + 2
+    for i in range(2):
+        assert_same_run(batch.run(i), simulate(plants[i], slotine_li(), sinusoid(2), t_final=0.3, q0=q0[i],
+                                               log_every=10))
+    assert np.max(np.abs(batch.run(0).tau)) == pytest.approx(60.0)  # the limit is reached: the path is exercised
+
+
+def test_a_diverging_run_is_frozen_with_its_partial_record_and_the_others_go_on():
+    """Example 6.3.1 with max_state = 40: the run started at q̇(0) = (12, −12) rad/s exceeds it at t = 0.021 s (its
+    peak |z| is 57.7; the others peak below 23). Its status and partial record are those of `simulate`; the run after
+    it finishes and equals its single run."""
+    ctrl, traj, plant = slotine_li(), sinusoid(2), Plant(ARM, PHI)
+    dq0 = np.array([[0.0, 0.0], [12.0, -12.0], [2.0, -2.0]])
+    batch = simulate_batch(plant, ctrl, traj, t_final=0.5, dq0=dq0, max_state=40.0, log_every=10)
+    assert batch.status[0] == batch.status[2] == "ok"
+    assert batch.status[1] == "diverged at t=0.021 s: state exceeded 40 in magnitude"
+    assert batch.n_logged[1] < batch.n_logged[0] == batch.t.size == 51
+    for i in range(3):
+        assert_same_run(batch.run(i), simulate(plant, ctrl, traj, t_final=0.5, dq0=dq0[i], max_state=40.0,
+                                               log_every=10))
+    assert batch.run(1).t[-1] == 0.02
+    frozen = batch.z[batch.n_logged[1] :, 1]  # the state it stopped in, within the guard, for the rest of the log
+    assert np.all(frozen == frozen[0]) and np.abs(frozen).max() <= 40.0
+
+
+def test_a_controller_that_stops_ends_only_its_own_run():
+    """Example 6.2.2 as the book ran it: with ė(0) = 1, M̂ loses definiteness in the first step (SimulationStop); with
+    q̇(0) = q̇_d(0) the same controller runs. The stop is found run by run and the others continue."""
+    s = load("example-6.2.2").setup
+    dq0 = np.array([[1.0, 1.0], [0.0, 0.0], [1.0, 1.0]])
+    batch = simulate_batch(s.plant, s.controller, s.trajectory, t_final=0.2, dq0=dq0, log_every=10)
+    assert batch.status[0] == batch.status[2] == "ok"
+    assert batch.status[1].startswith("diverged at t=0 s: the estimated mass matrix")
+    for i in range(3):
+        assert_same_run(batch.run(i), simulate(s.plant, s.controller, s.trajectory, t_final=0.2, dq0=dq0[i],
+                                               log_every=10))
+
+
+def test_when_every_run_stops_the_batch_ends_there():
+    s = load("example-6.2.2").setup
+    batch = simulate_batch(s.plant, s.controller, s.trajectory, t_final=5.0, q0=np.zeros((2, 2)))
+    assert not batch.ok.any()
+    assert batch.t.size == 1 and batch.run(0).t.size == 1
+
+
+def _peak_bytes(N: int, steps: int, log_every: int) -> tuple[int, object]:
+    tracemalloc.start()
+    res = simulate_batch(Plant(ARM, PHI), slotine_li(), sinusoid(2), t_final=steps * 1e-3, q0=np.zeros((N, 2)),
+                         log_every=log_every)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak, res
+
+
+def test_log_every_bounds_memory():
+    """The log holds steps/log_every + 1 samples per run; four times the steps at four times log_every keeps the same
+    peak memory, a small fraction of a per-step record of 400 runs × 400 steps (7.7 MB)."""
+    _peak_bytes(400, 10, 10)  # first-call allocations (caches) out of the way
+    short, res = _peak_bytes(400, 100, 10)
+    long, res_long = _peak_bytes(400, 400, 40)
+    assert res.z.shape == res_long.z.shape == (11, 400, 6)
+    assert long < 1.2 * short, (short, long)
+    assert long < 0.8e6
+    with pytest.raises(ConfigError, match=r"^simulation\.log_every: .* GB log"):
+        simulate_batch(Plant(ARM, PHI), slotine_li(), sinusoid(2), t_final=1000.0, q0=np.zeros((10_000, 2)))
+
+
+def test_what_cannot_vary_within_a_batch_is_named():
+    plant = Plant(ARM, PHI)
+    with pytest.raises(NotBatchable, match=r"^plant\.model\.l1: differs between runs"):
+        simulate_batch([plant, Plant(TwoLinkArm(l1=1.5), PHI)], slotine_li(), sinusoid(2), t_final=0.01)
+    s = load("example-6.2.2").setup
+    with pytest.raises(NotBatchable, match=r"^controller\.Kv: .*AdaptiveComputedTorque varies only phi_hat0"):
+        simulate_batch(plant, [s.controller, dataclasses.replace(s.controller, Kv=60.0)], s.trajectory, t_final=0.01)
+    with pytest.raises(NotBatchable, match=r"^simulation\.method: "):
+        simulate_batch(plant, slotine_li(), sinusoid(2), t_final=0.01, integrator=SolveIVP())
+    with pytest.raises(ConfigError, match=r"^plant\.q0: has 2 runs where another argument has 3"):
+        simulate_batch([plant] * 3, slotine_li(), sinusoid(2), t_final=0.01, q0=np.zeros((2, 2)))
+    with pytest.raises(ConfigError, match=r"^plant\.phi: the mass matrix is not positive definite"):
+        simulate_batch([plant, Plant(ARM, [0.8, -1.0])], slotine_li(), sinusoid(2), t_final=0.01)
+
+
+def test_equal_objects_are_not_stacked_and_shared_ones_are_returned_as_they_are():
+    ctrl = slotine_li()
+    assert stack([ctrl] * 3, "controller") is ctrl
+    merged = stack([slotine_li(), slotine_li(), slotine_li()], "controller")  # equal, distinct: nothing stacked
+    assert merged.Kv.shape == (2, 2)
+
+
+def test_run_indexes_like_a_sequence():
+    batch = simulate_batch(Plant(ARM, PHI), slotine_li(), sinusoid(2), t_final=0.01, q0=np.zeros((2, 2)),
+                           integrator=RK4(1e-3))
+    assert batch.run(-1).info["run"] == 1
+    with pytest.raises(IndexError):
+        batch.run(2)
+    assert [m["status"] for m in batch.metrics()] == ["ok", "ok"]
