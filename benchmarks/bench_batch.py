@@ -1,21 +1,23 @@
 """Throughput of many runs against the user's own script (run by `make bench`, never by pytest).
 
-1. `simulate_batch` for N = 1 … 10000 runs of Example 6.3.1 (Slotine–Li on the two-link arm), each with its own true
-   masses (±20 % around 0.8, 2.3 kg) and its own K_v in [5, 20], against N sequential runs of the plain Python RK4 loop
-   and of numpy + solve_ivp (benchmarks/bench_single_run.py), measured once here and extrapolated. Runs of
-   `T_SIM` = 1 s simulated (1000 RK4 steps); the run picked for the check must reach the plain loop's final state.
-2. The sweep end to end, as a user types it: `robotadapt sweep example-6.3.1 --random controller.Kv=5:20 --n N` (10 s
-   per run, process start, loading, chunking, writing the table and the figure included) on the local cores, with the
-   peak resident memory of its largest process.
+1. `simulate_batch` (numpy, then the jax backend in steady state) for N = 1 … 10000 runs of Example 6.3.1 (Slotine–Li on
+   the two-link arm), each with its own true masses (±20 % around 0.8, 2.3 kg) and its own K_v in [5, 20], against N
+   sequential runs of the plain Python RK4 loop and of numpy + solve_ivp (benchmarks/bench_single_run.py), measured once
+   here and extrapolated. Runs of `T_SIM` = 1 s simulated (1000 RK4 steps); the run picked for the check must reach the
+   plain loop's final state.
+2. The sweep end to end, as a user types it: `robotadapt sweep example-6.3.1 --random controller.Kv=5:20 --n N
+   --backend B` (10 s per run; process start, loading, compilation with an empty cache, chunking, writing the table and
+   the figure included) on the local cores, with the peak resident memory of its largest process.
 3. The same sweep (runs of `DASK_T_FINAL` s) through a Dask `LocalCluster` of 1 and of 2 single-threaded worker
    processes.
 
-`python benchmarks/bench_batch.py [--sweep-runs N] [--dask-runs N]`.
+`python benchmarks/bench_batch.py [--sweep-runs N] [--dask-runs N] [--sweep-backends jax,numpy]`.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import subprocess
 import sys
@@ -44,16 +46,18 @@ def per_run_baselines() -> tuple[float, float]:
     return timed(lambda: naive_rk4(T_SIM), 3)[0], timed(lambda: naive_solve_ivp(T_SIM), 3)[0]
 
 
-def batch(N: int) -> tuple[float, np.ndarray, tuple[float, float], float]:
-    """Wall time of N runs in one simulate_batch; the final state, masses and K_v of the last run."""
+def batch(N: int, backend: str = "numpy") -> tuple[float, np.ndarray, tuple[float, float], float]:
+    """Wall time of N runs in one simulate_batch; the final state, masses and K_v of the last run. With the jax backend
+    the time is the second call's (steady state: the first one traces and compiles)."""
     rng = np.random.default_rng(N)
     phis = np.array(PHI) * rng.uniform(0.8, 1.2, size=(N, 2))
     kvs = rng.uniform(5.0, 20.0, size=N)
     plants = [Plant(ARM, phi) for phi in phis]
     ctrls = [InertiaRelated(ARM, Lam=2.5, Kv=kv, Gamma=20.0, phi_hat0=[0.0, 0.0]) for kv in kvs]
-    t0 = time.perf_counter()
-    res = simulate_batch(plants, ctrls, sinusoid(2), t_final=T_SIM, integrator=RK4(DT), log_every=100)
-    seconds = time.perf_counter() - t0
+    for _ in range(2 if backend == "jax" else 1):
+        t0 = time.perf_counter()
+        res = simulate_batch(plants, ctrls, sinusoid(2), t_final=T_SIM, integrator=RK4(DT, backend), log_every=100)
+        seconds = time.perf_counter() - t0
     assert res.ok.all()
     return seconds, res.z[-1, -1], (float(phis[-1, 0]), float(phis[-1, 1])), float(kvs[-1])
 
@@ -63,23 +67,25 @@ def batch_table() -> None:
     print(f"simulate_batch: N runs of Example 6.3.1, {T_SIM:g} s simulated each (RK4, 1 kHz), per-run masses and K_v")
     print(f"baselines measured here, per run: plain RK4 loop {loop:.3f} s, numpy + solve_ivp RK45 {ivp:.3f} s "
           "(N runs: N times that)")
-    print(f"{'N':>6} {'wall (s)':>9} {'runs/s':>9} {'ms/run':>8} {'vs RK4 loop':>12} {'vs solve_ivp':>13} "
-          f"{'check |Δ|':>10}")
-    for N in SIZES:
-        seconds, state, phi, kv = batch(N)
-        diff = float(np.max(np.abs(state - naive_rk4(T_SIM, phi, kv))))
-        if diff > 1e-9:
-            sys.exit(f"N = {N}: the last run's final state differs from the plain loop's by {diff:.2e}")
-        print(f"{N:>6} {seconds:>9.3f} {N / seconds:>9.1f} {1e3 * seconds / N:>8.2f} {loop * N / seconds:>11.1f}x "
-              f"{ivp * N / seconds:>12.1f}x {diff:>10.1e}")
+    print(f"{'backend':>7} {'N':>6} {'wall (s)':>9} {'runs/s':>9} {'ms/run':>8} {'vs RK4 loop':>12} "
+          f"{'vs solve_ivp':>13} {'check |Δ|':>10}")
+    for backend in ("numpy", "jax"):
+        for N in SIZES:
+            seconds, state, phi, kv = batch(N, backend)
+            diff = float(np.max(np.abs(state - naive_rk4(T_SIM, phi, kv))))
+            if diff > 1e-9:
+                sys.exit(f"{backend}, N = {N}: the last run's final state differs from the plain loop's by {diff:.2e}")
+            print(f"{backend:>7} {N:>6} {seconds:>9.3f} {N / seconds:>9.1f} {1e3 * seconds / N:>8.2f} "
+                  f"{loop * N / seconds:>11.1f}x {ivp * N / seconds:>12.1f}x {diff:>10.1e}")
 
 
-def sweep_end_to_end(runs: int, loop_10s: float) -> None:
-    with tempfile.TemporaryDirectory() as out:
+def sweep_end_to_end(runs: int, loop_10s: float, backend: str) -> None:
+    """The sweep as a user types it, in a fresh process with an empty compilation cache (compilation included)."""
+    with tempfile.TemporaryDirectory() as out, tempfile.TemporaryDirectory() as cache:
         cmd = [sys.executable, "-m", "robotadapt", "sweep", "example-6.3.1", "--random", "controller.Kv=5:20",
-               "--n", str(runs), "--out", out]
+               "--n", str(runs), "--backend", backend, "--out", out]
         t0 = time.perf_counter()
-        proc = subprocess.run(cmd, capture_output=True, text=True)
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, ROBOTADAPT_CACHE=cache))
         seconds = time.perf_counter() - t0
     if proc.returncode != 0:
         sys.exit(proc.stderr)
@@ -112,9 +118,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sweep-runs", type=int, default=10_000)
     parser.add_argument("--dask-runs", type=int, default=2000)
+    parser.add_argument("--sweep-backends", default="jax,numpy", help="backends of the end-to-end sweep")
     args = parser.parse_args()
     batch_table()
-    sweep_end_to_end(args.sweep_runs, timed(naive_rk4, 3)[0])
+    loop_10s = timed(naive_rk4, 3)[0]
+    for backend in args.sweep_backends.split(","):
+        sweep_end_to_end(args.sweep_runs, loop_10s, backend)
     dask_scaling(args.dask_runs)
 
 

@@ -81,9 +81,31 @@ ARM = TwoLinkArm()
 CTRL = InertiaRelated(ARM, Lam=LAM, Kv=KV, Gamma=GAM, phi_hat0=[0.0, 0.0])
 
 
-def robotadapt_simulate() -> np.ndarray:
-    res = simulate(Plant(ARM, PHI), CTRL, sinusoid(2), t_final=T_FINAL, integrator=RK4(DT), log_every=1000)
+def robotadapt_simulate(backend: str = "numpy") -> np.ndarray:
+    res = simulate(Plant(ARM, PHI), CTRL, sinusoid(2), t_final=T_FINAL, integrator=RK4(DT, backend), log_every=1000)
     return np.concatenate([res.q[-1], res.dq[-1], res.x[-1]])
+
+
+def robotadapt_jax() -> np.ndarray:
+    return robotadapt_simulate("jax")
+
+
+def first_jax_run_seconds() -> tuple[float, float]:
+    """Wall time of a fresh process's first compiled run (tracing + compilation + run), with an empty compilation
+    cache and then with the cache the first process left on disk."""
+    import os
+    import tempfile
+
+    script = ("import time; t0 = time.perf_counter(); from bench_single_run import robotadapt_jax; robotadapt_jax(); "
+              "print(time.perf_counter() - t0)")
+    out = []
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, ROBOTADAPT_CACHE=cache)
+        for _ in range(2):
+            done = subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True, env=env,
+                                  cwd=os.path.dirname(os.path.abspath(__file__)))
+            out.append(float(done.stdout.split()[-1]))
+    return out[0], out[1]
 
 
 def robotadapt_batch_of_one() -> np.ndarray:
@@ -116,7 +138,9 @@ def main() -> None:
     rows = [("numpy + solve_ivp RK45 (rtol 1e-6)", naive_solve_ivp, 1e-4),
             ("plain Python RK4 loop, 1 kHz", naive_rk4, 0.0),
             ("robotadapt simulate, RK4 1 kHz", robotadapt_simulate, 1e-9),
-            ("robotadapt simulate_batch, 1 run", robotadapt_batch_of_one, 1e-9)]
+            ("robotadapt simulate_batch, 1 run", robotadapt_batch_of_one, 1e-9),
+            ("robotadapt simulate, backend jax", robotadapt_jax, 1e-9)]
+    robotadapt_jax()  # steady state: the compilation is timed apart below
     results = [(name, *timed(fn, 3), tol) for name, fn, tol in rows]
     t_ivp, t_loop, reference = results[0][1], results[1][1], results[1][2]
     print(f"Example 6.3.1, {T_FINAL:g} s simulated, one run (median of 3); speed-up = baseline time / time")
@@ -127,9 +151,14 @@ def main() -> None:
         print(f"{name:<36} {seconds:>9.3f} {t_loop / seconds:>11.2f}x {t_ivp / seconds:>12.2f}x {diff:>20.2e}")
         if diff > tol and tol > 0:
             failed.append(f"{name}: final state differs from the plain loop's by {diff:.2e} > {tol:g}")
+    cold, warm = first_jax_run_seconds()
+    print(f"\njax backend, first run of a fresh process (import, trace, compile, run): {cold:.2f} s with an empty "
+          f"compilation cache, {warm:.2f} s with the cache on disk")
     python = import_seconds("pass")
-    lib = import_seconds("import robotadapt.batch, robotadapt.scenarios")
-    print(f"\nstart-up: a fresh python {python:.3f} s; importing robotadapt.batch and .scenarios adds {lib - python:.3f} s")
+    top = import_seconds("import robotadapt")
+    lib = import_seconds("import robotadapt.simulation, robotadapt.batch, robotadapt.scenarios")
+    print(f"start-up: a fresh python {python:.3f} s; `import robotadapt` adds {top - python:.3f} s; the simulator, "
+          f"batches and scenarios {lib - python:.3f} s")
     if failed:
         sys.exit("\n".join(failed))
 

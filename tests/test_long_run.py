@@ -17,13 +17,14 @@ def _peak_bytes(steps: int, log_every: int) -> tuple[int, object]:
     return peak, result
 
 
-def test_memory_does_not_grow_with_the_number_of_steps():
+def test_memory_does_not_grow_with_the_number_of_steps(monkeypatch):
     """Three times the steps with the same number of logged samples: the same peak memory (within 20 %). Both runs span
-    more than two chunks of the vectorized reference, so the chunk buffer is the same size in both; a warm-up run first
-    keeps one-time allocations (imports, caches) out of the comparison."""
-    _peak_bytes(1_000, 10)
-    short, _ = _peak_bytes(5_000, 50)
-    long, res = _peak_bytes(15_000, 150)
+    more than two chunks of the vectorized reference (made small here: tracemalloc slows every allocation), so the
+    chunk buffer is the same size in both; a warm-up run first keeps one-time allocations (imports, caches) out."""
+    monkeypatch.setattr("robotadapt.simulation._CHUNK", 64)
+    _peak_bytes(200, 2)
+    short, _ = _peak_bytes(500, 5)
+    long, res = _peak_bytes(1_500, 15)
     assert res.t.size == 101
     assert long < 1.2 * short, (short, long)
 

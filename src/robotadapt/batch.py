@@ -33,6 +33,7 @@ from .result import SimulationResult
 from .simulation import (
     _CHUNK,
     _MAX_LOG_BYTES,
+    REASONS,
     RK4,
     Sampled,
     SolveIVP,
@@ -269,9 +270,14 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
         return _Loop(runs.plants[i], controllers[i], n)
 
     wall = time.perf_counter()
-    t, z, n_logged, status = _integrate(loop, single, stack(runs.trajectories, "trajectory"),
-                                        np.concatenate([runs.s0, runs.x0], axis=-1), dt, n_steps, log_every,
-                                        max_state, progress, line)
+    traj, z0 = stack(runs.trajectories, "trajectory"), np.concatenate([runs.s0, runs.x0], axis=-1)
+    if integrator.backend == "jax":
+        if line is not None:
+            raise ConfigError("simulation.backend", "a controller with a delay line (repetitive) keeps it on the "
+                              "host: use backend = 'numpy'")
+        t, z, n_logged, status = _compiled(loop, traj, z0, dt, n_steps, log_every, max_state)
+    else:
+        t, z, n_logged, status = _integrate(loop, single, traj, z0, dt, n_steps, log_every, max_state, progress, line)
     return BatchResult(t, z, n_logged, tuple(status), runs.plants, controllers, runs.trajectories,
                        time.perf_counter() - wall, dict(info or {}))
 
@@ -316,6 +322,19 @@ def _stopped(single: Callable[[int], _Loop], alive: Array, t: float, z: Array, d
         except (SimulationStop, np.linalg.LinAlgError) as stop:
             out[int(i)] = str(stop)
     return out
+
+
+def _compiled(loop: _Loop, traj: Any, z0: Array, dt: float, n_steps: int, log_every: int,
+              max_state: float) -> tuple[Array, Array, Array, list[str]]:
+    """:func:`_integrate` compiled by JAX (:mod:`robotadapt.compiled`): the same samples and statuses."""
+    from .compiled import integrate
+
+    t, z, n_logged, t_bad, why = integrate(loop, lambda times: traj(times[:, None]), z0, dt, n_steps, log_every,
+                                           max_state)
+    status = [f"diverged at t={t_bad[i]:.6g} s: " + REASONS[int(why[i])].format(max_state=max_state) if why[i]
+              else "ok" for i in range(z0.shape[0])]
+    T = int(n_logged.max())
+    return t[:T], z[:T], n_logged, status
 
 
 def _integrate(loop: _Loop, single: Callable[[int], _Loop], traj: Any, z0: Array, dt: float, n_steps: int,

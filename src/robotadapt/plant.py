@@ -109,7 +109,8 @@ class Plant:
             return self._phi_loaded
         if isinstance(t, float | int):
             return self._phi_loaded if t >= self.payload.time else self.phi  # type: ignore[union-attr]
-        return np.where(np.asarray(t)[..., None] >= self.payload.time, self._phi_loaded, self.phi)  # type: ignore[union-attr]
+        xp = array_namespace(t)
+        return xp.where(xp.asarray(t)[..., None] >= self.payload.time, self._phi_loaded, self.phi)  # type: ignore[union-attr]
 
     def truth_for(self, model: RobotModel, t: Array) -> Array | None:
         """φ(t) in `model`'s parameterization (the controller's), or None when `model` is not the plant's own."""

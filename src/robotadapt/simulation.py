@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.integrate import cumulative_simpson
 
-from ._array import matvec
+from ._array import array_namespace, matvec
 from .controllers.base import (
     Controller,
     HasDelayLine,
@@ -45,14 +45,21 @@ _CHUNK = 2048  # steps whose reference is evaluated in one vectorized call
 _MAX_LOG_BYTES = 4e9
 
 
+BACKENDS = ("numpy", "jax")
+
+
 @dataclass(frozen=True)
 class RK4:
-    """Classic fixed-step Runge–Kutta 4 with step `dt` (s)."""
+    """Classic fixed-step Runge–Kutta 4 with step `dt` (s), stepped by numpy or, with `backend="jax"`, compiled by JAX
+    (:mod:`robotadapt.compiled`; the same step, equal to round-off)."""
 
     dt: float = 1e-3
+    backend: str = "numpy"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dt", as_scalar(self.dt, "simulation.dt", positive=True))
+        if not isinstance(self.backend, str) or self.backend not in BACKENDS:
+            raise ConfigError("simulation.backend", f"expected one of {', '.join(BACKENDS)}; got {self.backend!r}")
 
 
 @dataclass(frozen=True)
@@ -176,19 +183,22 @@ class _Loop:
         else:
             tau, dx = self.controller(t, x, q, dq, ref)
             head, ddq = self._plant(t, z, q, dq, tau)
-        return np.concatenate([head, ddq, dx] if self.rigid else [head, dx], axis=-1)
+        return array_namespace(z).concatenate([head, ddq, dx] if self.rigid else [head, dx], axis=-1)
 
     def project(self, z: Array) -> Array:
         if not isinstance(self.controller, HasProjection):
             return z
-        return np.concatenate([z[..., : self.m], self.controller.project(z[..., self.m :])], axis=-1)
+        return array_namespace(z).concatenate([z[..., : self.m], self.controller.project(z[..., self.m :])], axis=-1)
+
+
+REASONS = {1: "non-finite state", 2: "state exceeded {max_state:g} in magnitude"}  # why the divergence guard stopped
 
 
 def _diverged(z: Array, max_state: float) -> str | None:
     if not np.all(np.isfinite(z)):
-        return "non-finite state"
+        return REASONS[1]
     if np.max(np.abs(z)) > max_state:
-        return f"state exceeded {max_state:g} in magnitude"
+        return REASONS[2].format(max_state=max_state)
     return None
 
 
@@ -255,6 +265,18 @@ def _rk4(loop: _Loop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_
                     k_log += 1
             bar.update(m)
     return t_log[:k_log], z_log[:k_log], "ok"
+
+
+def _rk4_compiled(loop: _Loop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int,
+                  max_state: float) -> tuple[Array, Array, str]:
+    """:func:`_rk4` compiled by JAX: the same logged samples and status."""
+    from .compiled import integrate
+
+    t, z, n_logged, t_bad, why = integrate(loop, traj, z0, dt, n_steps, log_every, max_state)
+    if int(why):
+        return t[:n_logged], z[:n_logged], f"diverged at t={float(t_bad):.6g} s: " + REASONS[int(why)].format(
+            max_state=max_state)
+    return t, z, "ok"
 
 
 def _solve_ivp(loop: _Loop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
@@ -353,6 +375,11 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
             info["sampling"] = integrator.describe()
             t, z, status, logged = integrate(loop, trajectory, z0, integrator, n_steps, log_every, max_state,
                                              progress, line)
+        elif integrator.backend == "jax":
+            if line is not None:
+                raise ConfigError("simulation.backend", "a controller with a delay line (repetitive) keeps it on the "
+                                  "host: use backend = 'numpy'")
+            t, z, status = _rk4_compiled(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state)
         else:
             t, z, status = _rk4(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress, line)
     wall = time.perf_counter() - wall

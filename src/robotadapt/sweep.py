@@ -28,7 +28,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -290,7 +290,8 @@ def scalar(value: Any) -> float:
 
 def check_metric(s: Setup, metric: str) -> None:
     """Raise unless `metric` is a numeric metric of this scenario's runs (asked of a one-step run)."""
-    probe = simulate(s.plant, s.controller, s.trajectory, t_final=s.integrator.dt, integrator=s.integrator, q0=s.q0,
+    integrator = replace(s.integrator, backend="numpy") if isinstance(s.integrator, RK4) else s.integrator
+    probe = simulate(s.plant, s.controller, s.trajectory, t_final=integrator.dt, integrator=integrator, q0=s.q0,
                      dq0=s.dq0)
     names = [k for k, v in probe.metrics().items()  # numbers, per-joint lists, or None where not reached yet
              if k != "wall_time_s" and (v is None or not math.isnan(scalar(v)))]
@@ -325,8 +326,9 @@ def _executor(workers: int, scheduler: str | None) -> Iterator[tuple[int, Callab
     else:
         import multiprocessing
 
-        # a Pool (not a ProcessPoolExecutor): leaving the block terminates the workers at once, also on Ctrl-C
-        with multiprocessing.Pool(workers, initializer=_ignore_interrupt) as pool:
+        # a Pool (not a ProcessPoolExecutor): leaving the block terminates the workers at once, also on Ctrl-C;
+        # spawned, not forked: a fork of a process whose JAX (or BLAS) threads are running can deadlock
+        with multiprocessing.get_context("spawn").Pool(workers, initializer=_ignore_interrupt) as pool:
             yield workers, lambda jobs: pool.imap_unordered(run_chunk, jobs)
 
 

@@ -7,7 +7,7 @@ from typing import Any
 
 
 def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
-    """The scenario positional and the `--set`, `--t-final`, `--dt`, `--control-period` overrides."""
+    """The scenario positional and the `--set`, `--t-final`, `--dt`, `--control-period`, `--backend` overrides."""
     parser.add_argument("scenario", help="a packaged scenario name (see `robotadapt list`) or a TOML file")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="override any scenario field, e.g. --set controller.Kv=20 (repeatable)")
@@ -15,12 +15,14 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dt", type=float, help="shorthand for --set simulation.dt=DT")
     parser.add_argument("--control-period", type=float, metavar="T_S",
                         help="shorthand for --set simulation.control_period=T_S: sampled-data control at 1/T_S Hz")
+    parser.add_argument("--backend", choices=("numpy", "jax"),
+                        help="shorthand for --set simulation.backend=NAME: 'jax' compiles the RK4 loop (extra [jax])")
 
 
 def overrides(args: argparse.Namespace) -> list[str]:
-    """`--set` assignments plus the `--t-final` / `--dt` / `--control-period` shorthands."""
+    """`--set` assignments plus the `--t-final` / `--dt` / `--control-period` / `--backend` shorthands."""
     out = list(args.set)
-    for name in ("t_final", "dt", "control_period"):
+    for name in ("t_final", "dt", "control_period", "backend"):
         if getattr(args, name, None) is not None:
             out.append(f"simulation.{name}={getattr(args, name)!r}")
     return out

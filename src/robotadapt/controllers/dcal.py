@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .._array import matvec, quad
+from .._array import array_namespace, matvec, quad
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar
@@ -29,6 +29,8 @@ class DesiredRegressorTable:
         if isinstance(t, float | int):  # the hot path: one instant, plain arithmetic
             i = round(t / self.h)
             return self.values[i] if 0 <= i < self.values.shape[0] and abs(i * self.h - t) <= 1e-9 else None
+        if array_namespace(t) is not np:  # traced by the compiled backend: Y_d is evaluated inside the program
+            return None
         k = np.rint(np.asarray(t) / self.h).astype(int)
         if np.any(k < 0) or np.any(k >= self.values.shape[0]) or not np.allclose(k * self.h, t, rtol=0, atol=1e-9):
             return None

@@ -211,8 +211,12 @@ def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled
     max_state."""
     if not isinstance(section, dict):
         raise ConfigError("simulation", "expected a table with t_final, dt, method")
-    check_names(list(section), ["t_final", "dt", "method", "rtol", "atol", "log_every", "max_state", "control_period",
-                                "discretization"], "simulation")
+    check_names(list(section), ["t_final", "dt", "method", "backend", "rtol", "atol", "log_every", "max_state",
+                                "control_period", "discretization"], "simulation")
+    compiled = section.get("backend", "numpy") != "numpy"
+    if compiled and (str(section.get("method", "rk4")).lower() != "rk4" or "control_period" in section):
+        raise ConfigError("simulation.backend", "the compiled backend steps the continuous-time fixed-step 'rk4'; "
+                          "drop backend for solve_ivp methods and sampled-data control")
     if "t_final" not in section:
         raise ConfigError("simulation.t_final", "missing: the simulated time in seconds")
     t_final = as_scalar(section["t_final"], "simulation.t_final", positive=True)
@@ -240,7 +244,7 @@ def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled
         if method.lower() == "rk4":
             if "rtol" in section or "atol" in section:
                 raise ConfigError("simulation.rtol", "tolerances apply to solve_ivp methods, not to the fixed-step 'rk4'")
-            integ = RK4(dt)
+            integ = RK4(dt, section.get("backend", "numpy"))
         else:
             integ = SolveIVP(method, section.get("rtol", 1e-8), section.get("atol", 1e-10), dt)
     log_every = section.get("log_every", 1)
