@@ -43,7 +43,7 @@ def _cases(model: RobotModel, traj) -> dict[str, Callable[[int], object]]:  # ty
     q = ref_all.q_des + 0.05 * rng.normal(size=(STEPS, n))
     dq = ref_all.dq_des + 0.05 * rng.normal(size=(STEPS, n))
     ddq = ref_all.ddq_des
-    phi = np.ones(p)
+    phi = np.ones(p) if model.default_phi is None else np.asarray(model.default_phi)  # n-DOF: M̂ must stay PD
     sl = InertiaRelated(model, Lam=2.5, Kv=10, Gamma=20, phi_hat0=phi)
     ct = AdaptiveComputedTorque(model, Kp=125, Kv=50, Gamma=500, phi_hat0=phi)
     dcal = DCAL(model, Kv=50, Kp=50, Ka=50, Gamma=20, phi_hat0=phi)
@@ -67,9 +67,29 @@ def _cases(model: RobotModel, traj) -> dict[str, Callable[[int], object]]:  # ty
     }
 
 
+def _n_dof() -> dict[str, tuple[RobotModel, object]]:
+    """The n-DOF models whose extras are installed: PUMA 560 (sympy, [symbolic]), Panda (Pinocchio, [urdf])."""
+    out: dict[str, tuple[RobotModel, object]] = {}
+    try:
+        from robotadapt.robots.symbolic import puma560
+
+        out["PUMA 560, DH table (sympy)"] = (puma560(), sinusoid(6, amplitude=0.3, offset=[0, -0.5, 0.5, 0, 0.3, 0]))
+    except ImportError as exc:
+        print(f"(PUMA 560 skipped: {exc})")
+    try:
+        from robotadapt.robots.pinocchio import PinocchioArm
+
+        out["Franka Panda, URDF (Pinocchio)"] = (PinocchioArm.example("panda"),
+                                                 sinusoid(7, amplitude=0.3, offset=[0, -0.785, 0, -2.356, 0, 1.571, 0.785]))
+    except (ImportError, ValueError) as exc:
+        print(f"(Panda skipped: {exc})")
+    return out
+
+
 def main() -> None:
     traj = sinusoid(2, amplitude=[1.0, 0.2], offset=[0.0, 1.0])
     models = {"two-link arm": (TwoLinkArm(), sinusoid(2)), "polar arm": (PolarArm(), traj)}
+    models.update(_n_dof())
     print(f"On-line cost of one control step (µs, median of 5 × {STEPS} steps), ratio to Slotine–Li in the same run")
     for label, (model, trajectory) in models.items():
         results = {name: _per_step(step) for name, step in _cases(model, trajectory).items()}

@@ -21,6 +21,25 @@ def _generator():
     return module
 
 
+DOCTESTED = ["robotadapt.simulation", "robotadapt.batch"]
+
+
+def test_every_module_with_docstring_examples_is_listed():
+    src = ROOT / "src"
+    found = sorted(".".join(p.relative_to(src).with_suffix("").parts) for p in (src / "robotadapt").rglob("*.py")
+                   if ">>>" in p.read_text(encoding="utf-8"))
+    assert found == sorted(DOCTESTED)
+
+
+@pytest.mark.parametrize("name", DOCTESTED)
+def test_docstring_examples_run(name):
+    import doctest
+    import importlib
+
+    failed, attempted = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+    assert attempted > 0 and failed == 0
+
+
 @pytest.mark.parametrize("page", ["theory.md", "cli.md", "audit.md"])
 def test_generated_pages_are_current(page):
     """Regenerate with `python docs/generate.py` when this fails."""

@@ -14,7 +14,6 @@ from functools import cached_property
 from typing import Any
 
 import numpy as np
-from scipy.linalg import solve_continuous_lyapunov
 
 from .._array import matvec, quad
 from ..robots.base import RobotModel
@@ -99,6 +98,8 @@ class AdaptiveComputedTorque:
                                   f"I)), got {kv:g}; give controller.Q or controller.P")
             P = np.block([[(kp + kv / 2) * eye, 0.5 * eye], [0.5 * eye, eye]])
             return P, np.block([[kp * eye, 0 * eye], [0 * eye, (2 * kv - 1) * eye]])
+        from scipy.linalg import solve_continuous_lyapunov  # here: importing the controllers stays light
+
         Q = np.eye(2 * n) if self.Q is None else self.Q
         P = solve_continuous_lyapunov(A.T, -Q)
         P = 0.5 * (P + P.T)
