@@ -142,9 +142,8 @@ def integrate(loop: _Loop, reference: Callable[[Array], Reference], z0: Array, d
     beyond `max_state`)."""
     jnp = jax_module().numpy
     blocks = n_steps // log_every  # logged samples after the initial one
-    runs = int(np.prod(z0.shape[:-1]))
-    steps_per_call = min(CHUNK_STEPS, REF_BYTES // (48 * runs * loop.n))
-    per_call = max(1, min(blocks, int(steps_per_call) // log_every))
+    sample_bytes = 48 * sum(np.asarray(a).size for a in reference(np.zeros(1)))  # 2 instants per step, 3 signals
+    per_call = max(1, min(blocks, int(min(CHUNK_STEPS, REF_BYTES // sample_bytes)) // log_every))
     run, arrays = _program(loop, dt, max_state)
 
     batch = z0.shape[:-1]
