@@ -391,6 +391,21 @@ def test_an_unwritable_cache_still_builds_the_arm(tmp_path, monkeypatch):
     assert not model._code.path.exists()
 
 
+def test_a_cache_miss_without_sympy_is_a_clear_error(tmp_path, monkeypatch):
+    """Without the [symbolic] extra an arm already in the disk cache still loads; a new table names the extra."""
+    import importlib.util
+
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "sympy" else find_spec(name, *a))
+    monkeypatch.setenv("ROBOTADAPT_CACHE", str(tmp_path))
+    dh_module.compiled.cache_clear()
+    try:
+        with pytest.raises(ConfigError, match=r"^robot\.kind: deriving an arm from its DH table needs sympy"):
+            planar_arm(2, lengths=[0.43, 0.21])
+    finally:
+        dh_module.compiled.cache_clear()
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # Input checking and the TOML-friendly constructor
 

@@ -40,6 +40,8 @@ from typing import Any
 
 import numpy as np
 
+from ..validation import ConfigError
+
 Array = Any
 #: the order of a link's standard parameters (Pinocchio's `Inertia.toDynamicParameters` order)
 LINK_PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
@@ -362,6 +364,9 @@ def compiled(geo: Geometry) -> Compiled:
     if path.exists():
         module = _import(path)
     else:
+        if importlib.util.find_spec("sympy") is None:
+            raise ConfigError("robot.kind", "deriving an arm from its DH table needs sympy (this table is not in the "
+                              "disk cache yet): pip install 'robotadapt[symbolic]'")
         source = generate(geo)
         if _write(path, source):
             module = _import(path)
