@@ -258,6 +258,8 @@ def _estimate(section: Any, the_plant: Plant, model: RobotModel) -> Any:
     """`phi_hat0 = {scale = s}` in [controller]: s × the true value of each of the controller's parameters, e.g. 0.7
     for an estimate 30 % low on all of them (n-DOF arms, whose φ has tens of entries). The true values are the plant's
     entries of the same names, so the plant's robot may add parameters (friction) the controller's lacks."""
+    if isinstance(section, dict) and isinstance(section.get("base"), dict):  # the law a robust one wraps
+        section = dict(section, base=_estimate(section["base"], the_plant, model))
     value = section.get("phi_hat0") if isinstance(section, dict) else None
     if not isinstance(value, dict):
         return section
