@@ -299,8 +299,11 @@ def check_metric(s: Setup, metric: str) -> None:
         raise ConfigError("--metric", f"unknown metric {metric!r}; this scenario's runs have {', '.join(names)}")
 
 
-def _ignore_interrupt() -> None:  # workers: the parent handles Ctrl-C and terminates them
+def _worker_init() -> None:
+    """A local worker: the parent handles Ctrl-C and terminates it; its compiled step runs on one thread, since every
+    core already has a worker (XLA's own threads would contend with the other workers; a user's XLA_FLAGS wins)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
 
 
 @contextmanager
@@ -328,7 +331,7 @@ def _executor(workers: int, scheduler: str | None) -> Iterator[tuple[int, Callab
 
         # a Pool (not a ProcessPoolExecutor): leaving the block terminates the workers at once, also on Ctrl-C;
         # spawned, not forked: a fork of a process whose JAX (or BLAS) threads are running can deadlock
-        with multiprocessing.get_context("spawn").Pool(workers, initializer=_ignore_interrupt) as pool:
+        with multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init) as pool:
             yield workers, lambda jobs: pool.imap_unordered(run_chunk, jobs)
 
 

@@ -10,6 +10,7 @@ import importlib
 import inspect
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, fields, is_dataclass
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -98,6 +99,11 @@ class Setup:
 
 def _params(ctor: Callable[..., Any], first: str | None) -> dict[str, bool]:
     """The constructor's keyword names (less its first argument) → whether each is required."""
+    return dict(_signature(ctor, first))
+
+
+@cache  # inspecting a signature costs more than building the object: once per constructor
+def _signature(ctor: Callable[..., Any], first: str | None) -> dict[str, bool]:
     if is_dataclass(ctor):
         names = {f.name: f.default is MISSING and f.default_factory is MISSING for f in fields(ctor)
                  if not f.metadata.get("internal")}
