@@ -23,18 +23,25 @@ Array = Any
 
 
 class UpdateLaw(Protocol):
+    """An update law of the passivity class (Table 6.4.1) driven by y = Zᵀr; `p` is the number of parameters."""
+
     p: int
 
     @property
-    def state_size(self) -> int: ...
+    def state_size(self) -> int:
+        """Length of the law's state x_a (p for the gradient law, 2p for Landau's PI law)."""
 
-    def initial_state(self, phi_hat0: Array) -> Array: ...
+    def initial_state(self, phi_hat0: Array) -> Array:
+        """x_a(0) for the initial estimate φ̂(0)."""
 
-    def estimate(self, xa: Array, y: Array) -> Array: ...
+    def estimate(self, xa: Array, y: Array) -> Array:
+        """φ̂ from the state and y = Zᵀr (Landau's proportional term (6.4.20) uses y)."""
 
-    def derivative(self, xa: Array, y: Array) -> Array: ...
+    def derivative(self, xa: Array, y: Array) -> Array:
+        """dx_a/dt: Γ y for the gradient law (Example 6.4.1), (6.4.21) for Landau's law, (6.7.13) with leakage."""
 
-    def lyapunov(self, xa: Array, phi: Array) -> Array: ...
+    def lyapunov(self, xa: Array, phi: Array) -> Array:
+        """The parameter part of the controller's Lyapunov function for the true φ (monitors only)."""
 
 
 @dataclass(frozen=True, eq=False)

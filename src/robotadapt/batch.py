@@ -33,7 +33,6 @@ from .result import SimulationResult
 from .simulation import (
     _CHUNK,
     _MAX_LOG_BYTES,
-    REASONS,
     RK4,
     Sampled,
     SolveIVP,
@@ -44,6 +43,7 @@ from .simulation import (
     _outputs,
     _rk4_step,
     _take,
+    diverged_status,
 )
 from .trajectories import Reference, SumOfSines
 from .validation import ConfigError, as_array, as_scalar, as_vector
@@ -335,8 +335,7 @@ def _compiled(loop: _Loop, traj: Any, z0: Array, dt: float, n_steps: int, log_ev
 
     t, z, n_logged, t_bad, why = integrate(loop, lambda times: traj(times[:, None]), z0, dt, n_steps, log_every,
                                            max_state)
-    status = [f"diverged at t={t_bad[i]:.6g} s: " + REASONS[int(why[i])].format(max_state=max_state) if why[i]
-              else "ok" for i in range(z0.shape[0])]
+    status = [diverged_status(float(t_bad[i]), int(why[i]), max_state) for i in range(z0.shape[0])]
     T = int(n_logged.max())
     return t[:T], z[:T], n_logged, status
 

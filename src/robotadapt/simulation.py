@@ -193,6 +193,11 @@ class _Loop:
 REASONS = {1: "non-finite state", 2: "state exceeded {max_state:g} in magnitude"}  # why the divergence guard stopped
 
 
+def diverged_status(t: float, why: int, max_state: float) -> str:
+    """The status of a run the compiled guard stopped at `t` for reason code `why` (a key of `REASONS`; 0: none)."""
+    return f"diverged at t={t:.6g} s: " + REASONS[why].format(max_state=max_state) if why else "ok"
+
+
 def _diverged(z: Array, max_state: float) -> str | None:
     if not np.all(np.isfinite(z)):
         return REASONS[1]
@@ -272,10 +277,7 @@ def _rk4_compiled(loop: _Loop, traj: Trajectory, z0: Array, dt: float, n_steps: 
     from .compiled import integrate
 
     t, z, n_logged, t_bad, why = integrate(loop, traj, z0, dt, n_steps, log_every, max_state)
-    if int(why):
-        return t[:n_logged], z[:n_logged], f"diverged at t={float(t_bad):.6g} s: " + REASONS[int(why)].format(
-            max_state=max_state)
-    return t, z, "ok"
+    return t[:n_logged], z[:n_logged], diverged_status(float(t_bad), int(why), max_state)
 
 
 def _solve_ivp(loop: _Loop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,

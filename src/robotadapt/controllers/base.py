@@ -48,7 +48,8 @@ class ControlLaw(Protocol):
 class Controller(ControlLaw, Protocol):
     """A control law whose torque and state derivative need only (t, x, q, q̇, ref)."""
 
-    def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]: ...
+    def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+        """(τ, dx/dt): the torque and the derivative of the controller's state, e.g. (6.3.14) and (6.3.16)."""
 
 
 @runtime_checkable
@@ -68,9 +69,11 @@ class HasRegressor(Protocol):
 class NeedsAcceleration(ControlLaw, Protocol):
     """A controller whose update law needs the measured joint acceleration (Table 6.2.1). Its torque must not."""
 
-    def torque(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array: ...
+    def torque(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        """τ from the state and the measured q, q̇ (6.2.5)."""
 
-    def update(self, t: Array, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference) -> Array: ...
+    def update(self, t: Array, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference) -> Array:
+        """dx/dt with the measured q̈ (6.2.19)."""
 
 
 @runtime_checkable
