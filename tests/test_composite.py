@@ -409,3 +409,30 @@ def test_problem_6_6_2_is_example_6_6_3_plus_a_study():
         for value in values:
             ctrl = load("example-6.6.3", [f"{key}={value}"]).setup.controller
             assert getattr(ctrl, key.split(".")[1]) == pytest.approx(value * (np.eye(2) if key.endswith("P0") else 1))
+
+
+SIGN_ROBUST_BASE = ["controller={kind='sign_robust', kd=0.5, base={kind='composite', Lam=5.0, Kv=10.0, a=1.0, P0=10.0, "
+                    "phi_hat0=[0.0, 0.0]}}"]
+
+
+@pytest.mark.parametrize("over", [
+    pytest.param(["plant.torque_limit=1.0"], id="limit"),
+    pytest.param(["plant.torque_limit=1.0", "plant.delay_samples=3", "plant.torque_rate_limit=20.0",
+                  "simulation.control_period=2e-3", "simulation.discretization='hold'"], id="limit-delay-rate-sampled"),
+    pytest.param(SIGN_ROBUST_BASE, id="sign-robust-around-composite"),
+])
+def test_prediction_error_identity_with_the_applied_torque(over):
+    """Spec §6.1 filters the torque the plant receives: τ_f = f * u = W_f φ (6.6.11), so τ_f − W_f φ̂ = W_f φ̃ (6.6.15)
+    holds to round-off on the one-link arm (as without limits, test above; sampled, with the zero-order-hold equivalent
+    of the filters) while the actuator or a sign term makes the applied torque differ from the composite law's own."""
+    scenario = load("example-6.6.3", ["simulation.t_final=4.0", *over])
+    res = scenario.run()
+    ctrl = scenario.setup.controller
+    ctrl = getattr(ctrl, "base", ctrl)
+    assert res.ok
+    Wf = ctrl.filtered_regressor(res.x, res.q, res.dq)
+    tau_f = tau_f_of(res.x, 1)
+    np.testing.assert_allclose(tau_f - Wf @ res.phi, 0.0, rtol=0, atol=1e-12)
+    own = Composite(ONE, Lam=5.0, Kv=10.0, a=1.0, P0=10.0, phi_hat0=np.zeros(2))
+    commanded = own(res.t, res.x, res.q, res.dq, Reference(res.q_des, res.dq_des, res.ddq_des))[0]
+    assert np.abs(commanded - res.tau).max() > 0.1  # the applied torque is not the law's own

@@ -43,6 +43,84 @@ def test_learning_law_stores_past_plus_kL_r():
     np.testing.assert_array_equal(dx, 0.0)
 
 
+KV = KP = KA = KL = 50.0
+PHI = np.array([0.8, 2.3])
+N_PER = 2000  # steps per period in the hand-written loops (the scenario uses 4000)
+
+
+def _by_hand(periods: int, sampled: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(7.2.31)–(7.2.32) written out: a ring of N samples of û_d, read (held) and written at every step t_k, the torque
+    τ = û_d(t_k − T) + k_L r + k_v r + k_p e + k_a‖e‖² r, and RK4 of M q̈ + V_m q̇ + G = τ. Continuous: τ is evaluated at
+    every RK4 stage with û_d(t_k − T) held; sampled: τ(t_k) is held over the step. Returns (q, û_d held) per step."""
+    traj, dt = sinusoid(2), T / N_PER
+    ring = np.zeros((N_PER, 2))
+    q, dq = np.zeros(2), np.zeros(2)
+
+    def torque(t, q, dq, held):
+        ref = traj(t)
+        e, de = ref.q_des - q, ref.dq_des - dq
+        r = de + e
+        return held + KL * r + KV * r + KP * e + KA * (e @ e) * r, r
+
+    def f(t, s, held, tau_held):
+        q, dq = s[:2], s[2:]
+        tau = tau_held if sampled else torque(t, q, dq, held)[0]
+        ddq = np.linalg.solve(ARM.mass_matrix(q, PHI), tau - ARM.coriolis_matrix(q, dq, PHI) @ dq - ARM.gravity(q, PHI))
+        return np.concatenate([dq, ddq])
+
+    qs, helds = [], []
+    for k in range(periods * N_PER):
+        t = k * dt
+        held = ring[k % N_PER].copy()
+        tau_k, r_k = torque(t, q, dq, held)
+        ring[k % N_PER] = held + KL * r_k
+        qs.append(q)
+        helds.append(held)
+        s = np.concatenate([q, dq])
+        k1 = f(t, s, held, tau_k)
+        k2 = f(t + dt / 2, s + dt / 2 * k1, held, tau_k)
+        k3 = f(t + dt / 2, s + dt / 2 * k2, held, tau_k)
+        k4 = f(t + dt, s + dt * k3, held, tau_k)
+        s = s + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        q, dq = s[:2], s[2:]
+    return np.array(qs), np.array(helds)
+
+
+def _short(periods: int, *extra: str):
+    return load("example-7.2.2", [f"simulation.t_final={periods * T!r}", f"simulation.dt={T / N_PER!r}",
+                                  "simulation.log_every=1", *extra])
+
+
+@pytest.mark.parametrize("sampled", [False, True], ids=["rk4", "sampled"])
+def test_two_periods_equal_the_equations_written_out(sampled):
+    """Table 7.2.2 on the RK4 and the sampled-data path equals (7.2.31)–(7.2.32) written out here, to round-off; the
+    logged state at t_k is the û_d(t_k − T) applied at t_k."""
+    extra = [f"simulation.control_period={T / N_PER!r}"] if sampled else []
+    res = _short(2, *extra).run()
+    q, held = _by_hand(2, sampled)
+    assert res.ok
+    np.testing.assert_allclose(res.q[:-1], q, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(res.x[:-1], held, rtol=1e-10, atol=1e-12)
+
+
+def test_first_period_holds_zero_and_applies_the_feedback_alone():
+    """û_d = 0 on [−T, 0) (7.2.32): during the first period the held value is exactly 0 and the torque is
+    k_L r + k_v r + k_p e + k_a‖e‖² r, on the single, sampled and batch paths."""
+    from robotadapt.batch import simulate_batch
+
+    s = _short(1).setup
+    runs = {"rk4": _short(1).run(), "sampled": _short(1, f"simulation.control_period={T / N_PER!r}").run(),
+            "batch": simulate_batch(s.plant, s.controller, s.trajectory, t_final=T, integrator=s.integrator,
+                                    log_every=1).run(0)}
+    for name, res in runs.items():
+        first = res.t < T - 1e-9
+        assert first.sum() == N_PER, name
+        np.testing.assert_array_equal(res.x[first], 0.0, err_msg=name)
+        e, r = res.e[first], res.e[first] + (res.dq_des - res.dq)[first]
+        feedback = (KL + KV + KA * (e * e).sum(axis=-1, keepdims=True)) * r + KP * e
+        np.testing.assert_allclose(res.tau[first], feedback, rtol=1e-12, atol=1e-12, err_msg=name)
+
+
 def test_peak_error_decreases_period_over_period(plain):
     """Example 7.2.2: once learning takes hold, each period's peak error is below the previous one."""
     assert plain.ok

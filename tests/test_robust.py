@@ -354,3 +354,29 @@ def test_boundary_layer_gives_a_residual_set_and_no_chattering():
     t, r = res.t[w], res.r[w]
     dissipated = trapezoid(np.einsum("ti,ij,tj->t", r, ctrl.base.Kv, r), t)
     assert dissipated <= res.V[w][0] - res.V[-1] + (t[-1] - t[0]) * eps * np.sum(bound**2 / (4 * ctrl.kd))
+
+
+def test_wrapper_reports_the_landau_pi_estimate_and_its_passivity_integral():
+    """Around a passivity controller with Landau's PI law, φ̂ = φ̂_I + F_p Zᵀr (6.4.20) is what the torque uses: the
+    wrapper's φ̂ and the passivity integral (6.4.4) ∫ −rᵀZ(φ − φ̂) are the base's, computed here by hand; with k_d = 0
+    the wrapped run is the base's run."""
+    from scipy.integrate import simpson
+
+    from robotadapt.adaptation import LandauPI
+    from robotadapt.controllers.passivity import PassivityBased, pid_servo
+    from robotadapt.simulation import RK4, simulate
+
+    K_I, F_P = np.array([[15.0, 2.0], [2.0, 6.0]]), np.array([[2.0, 0.3], [0.3, 1.0]])
+    base = PassivityBased(BOOK, pid_servo(2, FULL["Lam"], np.eye(2)), FULL["Kv"], LandauPI(2, K_I, F_P), np.zeros(2))
+    wrapped = SignRobust(BOOK, base, kd=0.0)
+    assert hasattr(wrapped, "phi_hat_at")
+    plant, traj = Plant(BOOK, [0.8, 2.3]), sinusoid(2)
+    runs = [simulate(plant, c, traj, t_final=2.0, integrator=RK4(1e-3), log_every=10) for c in (base, wrapped)]
+    res = runs[1]
+    Z, r = base.regressor(res.t, res.x, res.q, res.dq, traj(res.t))
+    phi_hat = res.x[:, -2:] + np.einsum("ij,tkj,tk->ti", F_P, Z, r)
+    np.testing.assert_allclose(res.phi_hat, phi_hat, rtol=1e-12, atol=1e-12)
+    integrand = -np.einsum("tk,tkj,tj->t", r, Z, np.array([0.8, 2.3]) - phi_hat)
+    assert res.passivity[-1] == pytest.approx(simpson(integrand, x=res.t), rel=1e-9)
+    for name in ("phi_hat", "passivity", "tau", "q"):
+        np.testing.assert_allclose(getattr(res, name), getattr(runs[0], name), rtol=1e-13, atol=1e-13, err_msg=name)

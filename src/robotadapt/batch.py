@@ -376,6 +376,8 @@ def _integrate(loop: _Loop, single: Callable[[int], _Loop], traj: Any, z0: Array
             z_in = z if alive.all() else _stand_in(z, alive)
             if line is not None:
                 z_in = line.sample(loop, k, t, z_in, refs[0])
+                if k % log_every == 0:  # the log at t_k holds the state applied at t_k
+                    z_log[k // log_every] = z_in
             try:
                 z_new = _rk4_step(loop, t, z_in, dt, *refs)
             except (SimulationStop, np.linalg.LinAlgError):
@@ -396,5 +398,8 @@ def _integrate(loop: _Loop, single: Callable[[int], _Loop], traj: Any, z0: Array
                 k_log += 1
             if not alive.any():
                 break
+        else:
+            if line is not None and n_steps % log_every == 0:  # the sample at t_final, logged, not integrated
+                z_log[k_log - 1] = line.sample(loop, n_steps, n_steps * dt, _stand_in(z, alive), refs[2])
     T = int(n_logged.max())
     return dt * (log_every * np.arange(T)), z_log[:T], n_logged, status

@@ -38,21 +38,26 @@ Array = Any
 Rate = Callable[[Array], Array]
 
 
-def _controller(loop: _Loop, t: float, x: Array, q: Array, dq: Array, ddq: Array,
-                ref: Reference) -> tuple[Array, Array, Rate]:
-    """τ_k, ẋ_k and the map x ↦ ẋ with every other input held at its sample."""
+def _controller(loop: _Loop, t: float, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference, actuator: Actuator,
+                pending: Any, Ts: float) -> tuple[Array, Array, Any, Array, Rate]:
+    """τ_k, the applied u_k and the actuator's next state, ẋ_k, and the map x ↦ ẋ with every other input (u_k too)
+    held at its sample. A law that filters the torque (FiltersTorque) filters u_k."""
     ctrl: Any = loop.controller
     if loop.needs_acceleration:
         def rate(x: Array) -> Array:
             return ctrl.update(t, x, q, dq, ddq, ref)
 
-        return ctrl.torque(t, x, q, dq, ref), rate(x), rate
+        tau = ctrl.torque(t, x, q, dq, ref)
+        u, pending = actuator.apply(pending, tau, Ts)
+        return tau, u, pending, rate(x), rate
 
     def held(x: Array) -> Array:
-        return ctrl(t, x, q, dq, ref)[1]
+        tau, dx = ctrl(t, x, q, dq, ref)
+        return ctrl.applied(dx, tau, u) if loop.filters_torque else dx
 
     tau, dx = ctrl(t, x, q, dq, ref)
-    return tau, dx, held
+    u, pending = actuator.apply(pending, tau, Ts)
+    return tau, u, pending, ctrl.applied(dx, tau, u) if loop.filters_torque else dx, held
 
 
 def _rk4(f: Callable[[float, Array], Array], t: float, y: Array, h: float) -> Array:
@@ -110,8 +115,7 @@ def integrate(loop: _Loop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: 
                 try:
                     if line is not None:
                         x = line.advance(loop.controller, k, t, x, q_m, dq_m, r)
-                    tau, dx, rate = _controller(loop, t, x, q_m, dq_m, ddq_m, r)
-                    u, pending = actuator.apply(pending, tau, Ts)
+                    tau, u, pending, dx, rate = _controller(loop, t, x, q_m, dq_m, ddq_m, r, actuator, pending, Ts)
                     if k % log_every == 0:
                         t_log[k_log] = t
                         for name, value in (("z", np.concatenate([s, x])), ("tau", u), ("tau_commanded", tau),

@@ -23,6 +23,7 @@ import numpy as np
 from ._array import array_namespace, matvec
 from .controllers.base import (
     Controller,
+    FiltersTorque,
     HasDelayLine,
     HasFilteredError,
     HasInstantEstimate,
@@ -140,7 +141,7 @@ class Sampled:
 class _Loop:
     """The closed-loop vector field dz/dt = f(t, z), z = [s, x]; the plant receives the saturated torque. Controllers
     that need q̈ get the plant's acceleration for the torque they just applied (no algebraic loop: their torque does not
-    depend on q̈)."""
+    depend on q̈). A law that filters the torque (FiltersTorque) is given the torque the plant receives."""
 
     plant: Plant
     controller: Any  # a Controller, or a NeedsAcceleration law (torque, then update with the plant's q̈)
@@ -148,9 +149,12 @@ class _Loop:
     needs_acceleration: bool = field(init=False)
     m: int = field(init=False)  # the plant's state size, 2n + its extra states
     rigid: bool = field(init=False)  # no extra plant states: the fast path
+    filters_torque: bool = field(init=False)  # the law filters the applied torque, and an actuator may change it
 
     def __post_init__(self) -> None:  # a protocol check costs microseconds: once, not per evaluation
         object.__setattr__(self, "needs_acceleration", isinstance(self.controller, NeedsAcceleration))
+        object.__setattr__(self, "filters_torque", isinstance(self.controller, FiltersTorque)
+                           and self.plant.actuator is not None)
         object.__setattr__(self, "m", 2 * self.n + self.plant.n_extra)
         object.__setattr__(self, "rigid", self.plant.n_extra == 0)
 
@@ -165,9 +169,8 @@ class _Loop:
             return self.controller.torque(t, x, q, dq, ref)
         return self.controller(t, x, q, dq, ref)[0]
 
-    def _plant(self, t: Array, z: Array, q: Array, dq: Array, tau: Array) -> tuple[Array, Array]:
-        """(the plant's ds/dt without q̇, q̈) for the commanded torque."""
-        u = self.plant.saturate(tau)
+    def _plant(self, t: Array, z: Array, q: Array, dq: Array, u: Array) -> tuple[Array, Array]:
+        """(the plant's ds/dt without q̇, q̈) for the applied torque."""
         if self.rigid:
             return dq, self.plant.acceleration(t, q, dq, u)
         ds = self.plant.derivative(t, z[..., : self.m], u)
@@ -177,11 +180,14 @@ class _Loop:
         q, dq, x = self.split(z)
         if self.needs_acceleration:
             tau = self.controller.torque(t, x, q, dq, ref)
-            head, ddq = self._plant(t, z, q, dq, tau)
+            head, ddq = self._plant(t, z, q, dq, self.plant.saturate(tau))
             dx = self.controller.update(t, x, q, dq, ddq, ref)
         else:
             tau, dx = self.controller(t, x, q, dq, ref)
-            head, ddq = self._plant(t, z, q, dq, tau)
+            u = self.plant.saturate(tau)
+            if self.filters_torque:
+                dx = self.controller.applied(dx, tau, u)
+            head, ddq = self._plant(t, z, q, dq, u)
         return array_namespace(z).concatenate([head, ddq, dx] if self.rigid else [head, dx], axis=-1)
 
     def project(self, z: Array) -> Array:
@@ -212,14 +218,16 @@ def _take(ref: Reference, i: int) -> Reference:
 
 @dataclass
 class _DelayLine:
-    """The ring buffer of a controller with a delay line (HasDelayLine), owned here so the controller stays pure."""
+    """The ring buffer of a controller with a delay line (HasDelayLine), owned here so the controller stays pure.
+
+    The law gets a copy of the slot it reads: a view would let the write that follows change the value it holds."""
 
     buffer: Array
 
     def advance(self, controller: Any, k: int, t: float, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         """The controller's state for step (or tick) k, reading and writing slot k mod N."""
         slot = k % self.buffer.shape[0]
-        x_new, store = controller.sample(t, x, q, dq, ref, self.buffer[slot])
+        x_new, store = controller.sample(t, x, q, dq, ref, self.buffer[slot].copy())
         self.buffer[slot] = store
         return x_new
 
@@ -257,6 +265,8 @@ def _rk4(loop: _Loop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_
                 try:
                     if line is not None:
                         z = line.sample(loop, start + j, t, z, r0)
+                        if (start + j) % log_every == 0:  # the log at t_k holds the state applied at t_k
+                            z_log[(start + j) // log_every] = z
                     z_new = _rk4_step(loop, t, z, dt, r0, _take(ref, 2 * j + 1), _take(ref, 2 * j + 2))
                 except SimulationStop as stop:
                     return t_log[:k_log], z_log[:k_log], f"diverged at t={t:.6g} s: {stop}"
@@ -268,6 +278,8 @@ def _rk4(loop: _Loop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_
                     t_log[k_log], z_log[k_log] = (start + j + 1) * dt, z
                     k_log += 1
             bar.update(m)
+    if line is not None and n_steps % log_every == 0:  # the sample at t_final, logged, not integrated
+        z_log[k_log - 1] = line.sample(loop, n_steps, n_steps * dt, z, _take(ref, 2 * m))
     return t_log[:k_log], z_log[:k_log], "ok"
 
 

@@ -77,6 +77,17 @@ class NeedsAcceleration(ControlLaw, Protocol):
 
 
 @runtime_checkable
+class FiltersTorque(Protocol):
+    """A controller whose state filters the torque the plant receives (the composite law's τ_f = f * τ, spec §6.1).
+
+    Its own derivative assumes the plant receives the torque it commands; where an actuator saturates, delays or
+    rate-limits it, or a wrapper adds to it, the simulator passes the applied torque through `applied`."""
+
+    def applied(self, dx: Array, tau: Array, u: Array) -> Array:
+        """dx/dt with the torque filter driven by the applied torque `u` instead of the command `tau`."""
+
+
+@runtime_checkable
 class HasProjection(Protocol):
     def project(self, x: Array) -> Array:
         """Map the state back into its admissible set (applied after every fixed step)."""

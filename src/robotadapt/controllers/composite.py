@@ -31,7 +31,8 @@ class Composite:
 
     dZ3/dt = −a Z3 + a² Y_h − a Y_g,   Z3(0) = a Y_h(q(0), q̇(0)),   W_f = a Y_h − Z3,
 
-    and the applied torque is filtered as dτ_f/dt = −a τ_f + a τ, τ_f(0) = 0.
+    and the applied torque u (τ itself unless an actuator or a wrapper changes it, :meth:`applied`) is filtered as
+    dτ_f/dt = −a τ_f + a u, τ_f(0) = 0.
 
     Forgetting (spec §6.3 "Optional variants", Slotine & Li 1989): λ(t) = `forgetting` (λ0 ≥ 0, 0 = the book's pure
     least squares), or, with `k0`, the bounded-gain rule λ(t) = λ0 (1 − ‖P‖/k0), which keeps the spectral norm ‖P‖ ≤ k0.
@@ -123,6 +124,13 @@ class Composite:
         n, p = self.model.n, self.model.p
         dx = xp.concatenate([dphi, xp.reshape(dP, lead + (p * p,)), dtau_f, xp.reshape(dZ3, lead + (n * p,))], axis=-1)
         return tau, dx
+
+    def applied(self, dx: Array, tau: Array, u: Array) -> Array:
+        """dx/dt with dτ_f/dt = −a τ_f + a u for the torque u the plant receives (spec §6.1: the filtered torque is the
+        applied one, so that τ_f − W_f φ̂ = W_f φ̃ (6.6.15) holds under torque limits, delays and added terms)."""
+        xp = array_namespace(dx, u)
+        k, n = self.model.p * (self.model.p + 1), self.model.n
+        return xp.concatenate([dx[..., :k], dx[..., k : k + n] + self.a * (u - tau), dx[..., k + n :]], axis=-1)
 
     def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
         """V of (6.6.29) with the true φ: ½ rᵀ M(q) r + ½ φ̃ᵀ P⁻¹ φ̃."""

@@ -7,7 +7,7 @@ switching term larger than the disturbance restores V̇ ≤ −rᵀK_v r (6.7.12
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -16,10 +16,7 @@ from .._array import array_namespace
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_scalar, as_vector
-from .base import Array, Controller, HasFilteredError, NeedsAcceleration, freeze
-
-# optional parts of the contract (controllers.base) the wrapper has exactly when its base has them
-_DELEGATED = ("lyapunov", "regressor", "project")
+from .base import Array, Controller, FiltersTorque, HasFilteredError, NeedsAcceleration, Prepares, freeze
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,8 +38,10 @@ class SignRobust:
     V̇ ≤ −rᵀK_v r + ε Σ_i sup|T_d,i|² / (4 k_d,i), and only a residual set is guaranteed (the time average of ‖r‖²
     is O(ε); in practice |r_i| ≲ ε): e no longer goes exactly to zero.
 
-    The state x, φ̂, the filtered error, the Lyapunov function, the regressor (for the passivity integral (6.4.4)) and
-    a projection of the state are the base's: the last three exist on the wrapper exactly when the base has them.
+    Everything else is the base's: the state x, φ̂, the filtered error, and whatever optional part of the contract
+    (:mod:`robotadapt.controllers.base`) the base has — the Lyapunov function, the regressor (for the passivity integral
+    (6.4.4)), the φ̂ the torque uses (Landau's PI law, (6.4.20)), a projection, tables prepared ahead of the run — exists
+    on the wrapper exactly when the base has it.
     """
 
     model: RobotModel
@@ -70,11 +69,14 @@ class SignRobust:
                                                      nonnegative=True))
 
     def __getattr__(self, name: str) -> Any:
-        """The base's optional methods (lyapunov, regressor, project), so that the simulator's protocol checks see the
-        wrapper as having them exactly when the base does."""
-        if name in _DELEGATED:
-            return getattr(self.base, name)
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        """The base's public attributes, so that the simulator's protocol checks see the wrapper as having an optional
+        part exactly when the base does; `prepare` returns the wrapper around the prepared base."""
+        base = self.__dict__.get("base")
+        if base is None or name.startswith("_"):
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        if name == "prepare" and isinstance(base, Prepares):
+            return lambda trajectory, dt, t_final: replace(self, base=base.prepare(trajectory, dt, t_final))
+        return getattr(base, name)
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -98,4 +100,7 @@ class SignRobust:
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         tau_a, dx = self.base(t, x, q, dq, ref)
-        return tau_a + self.kd * self.switching(self.filtered_error(t, x, q, dq, ref)), dx
+        tau = tau_a + self.kd * self.switching(self.filtered_error(t, x, q, dq, ref))
+        if isinstance(self.base, FiltersTorque):  # a composite base filters the torque applied, sign term included
+            dx = self.base.applied(dx, tau_a, tau)
+        return tau, dx
