@@ -28,12 +28,12 @@ from pathlib import Path
 import numpy as np
 from bench_single_run import ARM, DT, PHI, naive_rk4, naive_solve_ivp, timed
 
-from robotadapt.batch import simulate_batch
 from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
-from robotadapt.scenarios import load
-from robotadapt.simulation import RK4
-from robotadapt.sweep import make_sweep, run_sweep
+from robotadapt.sim import RK4
+from robotadapt.sim.batch import simulate_batch
+from robotadapt.studies.scenarios import load
+from robotadapt.studies.sweep import make_sweep, run_sweep
 from robotadapt.trajectories import sinusoid
 
 T_SIM = 1.0
@@ -108,7 +108,7 @@ def dask_scaling(runs: int) -> None:
         with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
                 tempfile.TemporaryDirectory() as out:
             t0 = time.perf_counter()
-            run_sweep(sweep, Path(out), scheduler=cluster.scheduler_address, plot=False)
+            run_sweep(sweep, Path(out), scheduler=cluster.scheduler_address)
             rates[workers] = runs / (time.perf_counter() - t0)
     print(f"\nDask LocalCluster, {runs} runs of {DASK_T_FINAL:g} s, single-threaded worker processes: "
           f"1 worker {rates[1]:.0f} runs/s, 2 workers {rates[2]:.0f} runs/s, {rates[2] / rates[1]:.2f}x")

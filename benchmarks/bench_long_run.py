@@ -8,7 +8,8 @@ import tracemalloc
 
 import numpy as np
 
-from robotadapt.scenarios import load
+from robotadapt.analysis.metrics import metrics
+from robotadapt.studies.scenarios import load
 
 
 def run(steps: int) -> tuple[float, float, object]:
@@ -25,7 +26,7 @@ def run(steps: int) -> tuple[float, float, object]:
 def main() -> None:
     base_s, base_peak, _ = run(10_000)
     seconds, peak, res = run(1_000_000)
-    m = res.metrics()  # type: ignore[attr-defined]
+    m = metrics(res)
     print("Long run: Example 6.3.1, 10^6 RK4 steps of 1 ms, 1001 logged samples")
     print(f"  status {m['status']}, wall {seconds:.1f} s ({1e6 / seconds:,.0f} steps/s; 10^4 steps took {base_s:.2f} s)")
     print(f"  peak traced memory {peak / 1e6:.2f} MB vs {base_peak / 1e6:.2f} MB for 10^4 steps "

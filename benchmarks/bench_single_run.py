@@ -21,11 +21,11 @@ from collections.abc import Callable
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from robotadapt.batch import simulate_batch
 from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
 from robotadapt.robots import TwoLinkArm
-from robotadapt.simulation import RK4, simulate
+from robotadapt.sim import RK4, simulate
+from robotadapt.sim.batch import simulate_batch
 from robotadapt.trajectories import sinusoid
 
 L1 = L2 = 1.0
@@ -156,7 +156,7 @@ def main() -> None:
           f"compilation cache, {warm:.2f} s with the cache on disk")
     python = import_seconds("pass")
     top = import_seconds("import robotadapt")
-    lib = import_seconds("import robotadapt.simulation, robotadapt.batch, robotadapt.scenarios")
+    lib = import_seconds("import robotadapt.sim, robotadapt.sim.batch, robotadapt.studies.scenarios")
     print(f"start-up: a fresh python {python:.3f} s; `import robotadapt` adds {top - python:.3f} s; the simulator, "
           f"batches and scenarios {lib - python:.3f} s")
     if failed:

@@ -1,4 +1,4 @@
-"""Batch simulation (`robotadapt.batch`): N closed loops in one vectorized loop reproduce N calls of `simulate`; a run
+"""Batch simulation (`robotadapt.sim.batch`): N closed loops in one vectorized loop reproduce N calls of `simulate`; a run
 that diverges or stops is frozen with its own status and partial record while the others go on; the log bounds memory.
 
 The reference is always the single-run simulator on the same objects: the batch must give the same logged instants,
@@ -13,12 +13,13 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from robotadapt.batch import PER_RUN, NotBatchable, simulate_batch, stack
+from robotadapt.analysis.metrics import metrics
 from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
 from robotadapt.robots import TwoLinkArm
-from robotadapt.scenarios import load
-from robotadapt.simulation import RK4, SolveIVP, simulate
+from robotadapt.sim import RK4, SolveIVP, simulate
+from robotadapt.sim.batch import PER_RUN, NotBatchable, simulate_batch, stack
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import sinusoid
 from robotadapt.validation import ConfigError
 
@@ -41,7 +42,7 @@ def assert_same_run(batch_run, single) -> None:
         if a is not None:
             assert a.shape == b.shape, name
             np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * max(1.0, float(np.abs(b).max(initial=0.0))), err_msg=name)
-    m1, m2 = batch_run.metrics(), single.metrics()
+    m1, m2 = metrics(batch_run), metrics(single)
     for m in (m1, m2):
         m.pop("wall_time_s")
     assert m1.keys() == m2.keys()
@@ -124,8 +125,8 @@ def test_every_controller_family_batches_over_plant_parameters_and_initial_state
 def test_plants_with_more_state_than_q_and_dq_batch_too():
     """Elastic joints (θ, θ̇ per joint) and a torque limit (the applied torque saturates): the plant's own initial
     state s0 = [q0, q̇0, θ0, θ̇0] per run, per-run true masses, and the same runs as `simulate`."""
-    from robotadapt.actuators import Actuator
-    from robotadapt.unmodeled import ElasticJoint
+    from robotadapt.plant.actuators import Actuator
+    from robotadapt.plant.unmodeled import ElasticJoint
 
     joint, limit = ElasticJoint(2, J=0.2, K=400.0, D=2.0), Actuator(2, torque_limit=60.0)
     plants = [Plant(ARM, PHI * k, elastic_joint=joint, actuator=limit) for k in (1.0, 1.2)]
@@ -226,4 +227,4 @@ def test_run_indexes_like_a_sequence():
     assert batch.run(-1).info["run"] == 1
     with pytest.raises(IndexError):
         batch.run(2)
-    assert [m["status"] for m in batch.metrics()] == ["ok", "ok"]
+    assert [metrics(batch.run(i))["status"] for i in range(len(batch))] == ["ok", "ok"]

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from robotadapt.cli import main
-from robotadapt.scenarios import available
+from robotadapt.studies.scenarios import available
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -110,7 +110,7 @@ def test_set_changes_the_saved_scenario_and_the_result(tmp_path, capsys):
 
 
 def test_run_accepts_a_scenario_file_and_dt(tmp_path, capsys):
-    from robotadapt.scenarios import load
+    from robotadapt.studies.scenarios import load
 
     path = tmp_path / "mine.toml"
     path.write_text(load("example-6.5.1").text)
@@ -145,7 +145,7 @@ def _write(tmp_path: Path, name: str, content: str | bytes) -> str:
 
 
 def _without_controller(tmp_path: Path) -> str:
-    from robotadapt.scenarios import load
+    from robotadapt.studies.scenarios import load
 
     data = tomllib.loads(load("example-6.3.1").text)
     del data["controller"]

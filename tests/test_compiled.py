@@ -1,14 +1,15 @@
-"""The compiled backend (robotadapt.compiled): the same step under jax.jit and lax.scan equals the numpy backend."""
+"""The compiled backend (robotadapt.sim.compiled): the same step under jax.jit and lax.scan equals the numpy backend."""
 
 import numpy as np
 import pytest
 
-from robotadapt.batch import simulate_batch
+from robotadapt.analysis.metrics import metrics
 from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
 from robotadapt.robots import TwoLinkArm
-from robotadapt.scenarios import load
-from robotadapt.simulation import RK4
+from robotadapt.sim import RK4
+from robotadapt.sim.batch import simulate_batch
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import sinusoid
 from robotadapt.validation import ConfigError
 
@@ -33,7 +34,7 @@ def test_the_books_examples_equal_the_numpy_backend(name):
     for field in ("q", "dq", "x", "tau"):
         scale = max(1.0, float(np.abs(getattr(a, field)).max()))
         np.testing.assert_allclose(getattr(b, field), getattr(a, field), rtol=0, atol=1e-9 * scale, err_msg=field)
-    assert a.metrics()["final_abs_error"] == pytest.approx(b.metrics()["final_abs_error"], abs=1e-9)
+    assert metrics(a)["final_abs_error"] == pytest.approx(metrics(b)["final_abs_error"], abs=1e-9)
 
 
 def test_an_n_dof_symbolic_arm_compiles_too():

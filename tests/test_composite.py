@@ -18,8 +18,8 @@ from scipy.integrate import cumulative_simpson
 
 from robotadapt.controllers.composite import Composite
 from robotadapt.robots import OneLinkArm, TwoLinkArm
-from robotadapt.scenarios import load
-from robotadapt.simulation import RK4, simulate
+from robotadapt.sim import RK4, simulate
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import Reference, exponential_step
 from robotadapt.validation import ConfigError
 
@@ -399,7 +399,7 @@ def test_two_link_filtered_torque_identity_is_exact_up_to_the_integrator():
 
 def test_problem_6_6_2_is_example_6_6_3_plus_a_study():
     """The study's base setting is Example 6.6.3, and each study key is a valid override of it."""
-    folder = resources.files("robotadapt.scenarios")
+    folder = resources.files("robotadapt.studies.scenarios")
     problem = tomllib.loads(folder.joinpath("problem-6.6-2.toml").read_text(encoding="utf-8"))
     example = tomllib.loads(folder.joinpath("example-6.6.3.toml").read_text(encoding="utf-8"))
     assert problem.pop("study") == {"controller.P0": [1.0, 10.0, 100.0], "controller.a": [0.5, 1.0, 5.0]}

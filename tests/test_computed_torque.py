@@ -16,13 +16,13 @@ import re
 import numpy as np
 import pytest
 
-from robotadapt.analysis import lyapunov_increase
+from robotadapt.analysis.metrics import lyapunov_increase
 from robotadapt.cli import main
 from robotadapt.controllers.base import SimulationStop
 from robotadapt.controllers.computed_torque import AdaptiveComputedTorque
 from robotadapt.robots import PolarArm
-from robotadapt.scenarios import load
-from robotadapt.simulation import simulate
+from robotadapt.sim import simulate
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import Reference
 from robotadapt.validation import ConfigError
 from test_controllers import BOOK, OTHER, random_instant, spec_G, spec_inverse_dynamics, spec_M, spec_Vm, spec_Y

@@ -21,7 +21,7 @@ def _generator():
     return module
 
 
-DOCTESTED = ["robotadapt.simulation", "robotadapt.batch"]
+DOCTESTED = ["robotadapt.sim.batch", "robotadapt.sim.simulation"]
 
 
 def test_every_module_with_docstring_examples_is_listed():

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robotadapt.scenarios import load
-from robotadapt.simulation import simulate
+from robotadapt.sim import simulate
+from robotadapt.studies.scenarios import load
 
 M1, M2, L1, L2 = 0.8, 2.3, 1.0, 1.0  # Example 6.3.1 / 6.2.1 plant (spec §1.3)
 

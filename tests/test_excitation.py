@@ -13,8 +13,8 @@ import json
 import numpy as np
 import pytest
 
+from robotadapt.analysis.excitation import excitation
 from robotadapt.cli import main
-from robotadapt.excitation import excitation
 from robotadapt.robots import OneLinkArm, TwoLinkArm
 from robotadapt.trajectories import SumOfSines, exponential_step, sinusoid
 from robotadapt.validation import ConfigError

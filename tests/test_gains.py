@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from robotadapt import gains
+from robotadapt.analysis import gains
+from robotadapt.analysis.gains import _mismatch, check, estimate_zeta, gain_report
 from robotadapt.cli import main
-from robotadapt.gains import _mismatch, check, estimate_zeta, gain_report
 from robotadapt.robots import TwoLinkArm
-from robotadapt.scenarios import load
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import sinusoid
 
 ARM, PHI = TwoLinkArm(), np.array([0.8, 2.3])

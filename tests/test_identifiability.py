@@ -90,7 +90,7 @@ def test_general_serial_chain_count(n):
 
 def test_panda_and_ur5():
     panda = PinocchioArm.example("panda", viscous=True, coulomb=True)
-    full, rigid = base_parameters(panda), panda.base_parameters(friction=False)
+    full, rigid = base_parameters(panda), base_parameters(panda, friction=False)
     assert (full.count, rigid.count) == (43 + 14, 43)
     assert full.margin[0] > 0.1 and full.margin[1] < 1e-12 and full.residual < 1e-12
     assert_factorizes(full)
@@ -127,7 +127,7 @@ def test_names_state_the_combinations():
 
 def test_model_in_base_parameters_has_the_same_dynamics():
     arm = PinocchioArm.example("panda", viscous=True)
-    basis = arm.base_parameters()
+    basis = base_parameters(arm)
     model = BaseParameterModel(basis)
     rng = np.random.default_rng(4)
     phi = arm.default_phi * rng.uniform(0.5, 1.5, arm.p)
@@ -154,7 +154,7 @@ def test_slotine_li_in_base_parameters_at_one_instant():
     from robotadapt.trajectories import Reference
 
     arm = PinocchioArm.example("ur5")
-    model = BaseParameterModel(arm.base_parameters())
+    model = BaseParameterModel(base_parameters(arm))
     ctrl = InertiaRelated(model, Lam=5.0, Kv=10.0, Gamma=1.0, phi_hat0=model.default_phi)
     q, dq, _, a = fresh_states(arm, 1)
     tau, dx = ctrl(0.0, model.default_phi, q[0], dq[0], Reference(q[0], dq[0], a[0]))

@@ -5,7 +5,8 @@ import tracemalloc
 
 import numpy as np
 
-from robotadapt.scenarios import load
+from robotadapt.analysis.metrics import metrics
+from robotadapt.studies.scenarios import load
 
 
 def _peak_bytes(steps: int, log_every: int) -> tuple[int, object]:
@@ -21,7 +22,7 @@ def test_memory_does_not_grow_with_the_number_of_steps(monkeypatch):
     """Three times the steps with the same number of logged samples: the same peak memory (within 20 %). Both runs span
     more than two chunks of the vectorized reference (made small here: tracemalloc slows every allocation), so the
     chunk buffer is the same size in both; a warm-up run first keeps one-time allocations (imports, caches) out."""
-    monkeypatch.setattr("robotadapt.simulation._CHUNK", 64)
+    monkeypatch.setattr("robotadapt.sim.simulation.CHUNK", 64)
     _peak_bytes(200, 2)
     short, _ = _peak_bytes(500, 5)
     long, res = _peak_bytes(1_500, 15)
@@ -33,6 +34,6 @@ def test_lyapunov_function_does_not_drift_on_a_long_run():
     """Example 6.3.1 over 30 s (30 000 RK4 steps): V keeps falling to round-off; it never climbs back."""
     res = load("example-6.3.1", ["simulation.t_final=30", "simulation.log_every=100"]).run()
     assert res.ok
-    assert res.metrics()["lyapunov_max_rel_increase"] < 1e-12
+    assert metrics(res)["lyapunov_max_rel_increase"] < 1e-12
     assert res.V[-1] < 1e-12 * res.V[0]
     assert np.all(np.abs(res.e[-1]) < 1e-9)

@@ -9,13 +9,10 @@ import numpy as np
 import pytest
 from scipy.integrate import cumulative_simpson
 
-from robotadapt.monitors import (
-    controller_series,
-    convergence_time,
-    lyapunov_increase_fraction,
-    monitor_metrics,
-)
-from robotadapt.scenarios import load
+from robotadapt.analysis.metrics import metrics
+from robotadapt.analysis.monitors import convergence_time, lyapunov_increase_fraction, monitor_metrics
+from robotadapt.sim.outputs import controller_series
+from robotadapt.studies.scenarios import load
 
 PHI = np.array([0.8, 2.3])  # Example 6.3.1
 
@@ -83,8 +80,8 @@ def test_convergence_time_and_increase_fraction_on_closed_forms():
 
 def test_every_run_carries_its_monitors_in_metrics():
     """Issue 5: the Lyapunov, passivity and least-squares monitors reach metrics.json through every run."""
-    from robotadapt.scenarios import load
+    from robotadapt.studies.scenarios import load
 
-    m = load("example-6.6.3", ["simulation.t_final=2"]).run().metrics()
+    m = metrics(load("example-6.6.3", ["simulation.t_final=2"]).run())
     assert m["lambda_min_P_inv_final"] > m["lambda_min_P_inv_initial"] > 0
     assert m["passivity_holds"] is True and m["lyapunov_increase_fraction"] == 0.0

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from robotadapt.scenarios import load
+from robotadapt.studies.scenarios import load
 
 SCALE = "{scale = 0.7}"
 

@@ -19,13 +19,13 @@ from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import brentq
 
 from robotadapt._array import matvec
-from robotadapt.adaptation import Gradient, LandauPI, SwitchingSigma
-from robotadapt.analysis import lyapunov_increase
+from robotadapt.analysis.metrics import lyapunov_increase
 from robotadapt.controllers import InertiaRelated
+from robotadapt.controllers.adaptation import Gradient, LandauPI, SwitchingSigma
 from robotadapt.controllers.passivity import PassivityBased, ServoFilter, pd_servo, pid_servo, state_space_servo
 from robotadapt.robots import TwoLinkArm
-from robotadapt.scenarios import load
-from robotadapt.simulation import simulate
+from robotadapt.sim import simulate
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import Reference
 from robotadapt.validation import ConfigError
 from test_controllers import spec_G, spec_M, spec_Vm, spec_Y

@@ -266,7 +266,7 @@ def _write(tmp, joint_type: str):
 
 
 def test_panda_slotine_li_converges_fast_version():
-    from robotadapt.scenarios import load
+    from robotadapt.studies.scenarios import load
 
     res = load("panda-slotine-li", ["simulation.t_final=5"]).run()
     assert res.ok
@@ -277,7 +277,7 @@ def test_panda_slotine_li_converges_fast_version():
 
 @pytest.mark.slow
 def test_panda_slotine_li_converges():
-    from robotadapt.scenarios import load
+    from robotadapt.studies.scenarios import load
 
     res = load("panda-slotine-li").run()
     assert res.ok and res.t[-1] == pytest.approx(20.0)
@@ -288,7 +288,7 @@ def test_panda_slotine_li_converges():
 
 @pytest.mark.parametrize("name", ["panda-composite", "ur5-dcal"])
 def test_other_arm_scenarios_run(name):
-    from robotadapt.scenarios import load
+    from robotadapt.studies.scenarios import load
 
     res = load(name, ["simulation.t_final=0.5"]).run()
     assert res.ok
@@ -299,7 +299,7 @@ def test_other_arm_scenarios_run(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["panda-composite", "ur5-dcal"])
 def test_other_arm_scenarios_converge(name):
-    from robotadapt.scenarios import load
+    from robotadapt.studies.scenarios import load
 
     res = load(name).run()
     assert res.ok

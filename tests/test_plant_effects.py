@@ -1,6 +1,6 @@
-"""Actuator and sensor effects (`robotadapt.actuators`, `robotadapt.sensors`): the applied torque never exceeds its
-limits, the delay shifts the command by whole ticks, the measurement path is the documented recursion, seeded noise is
-reproducible bit for bit, and the noise-driven drift of the gradient law has the rate the theory gives."""
+"""Actuator and sensor effects (`robotadapt.plant.actuators`, `robotadapt.plant.sensors`): the applied torque never
+exceeds its limits, the delay shifts the command by whole ticks, the measurement path is the documented recursion,
+seeded noise is reproducible bit for bit, and the noise-driven drift of the gradient law has the rate the theory gives."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import math
 import numpy as np
 import pytest
 
-from robotadapt.actuators import Actuator
 from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
+from robotadapt.plant.actuators import Actuator
+from robotadapt.plant.sensors import Sensor
 from robotadapt.robots import TwoLinkArm
-from robotadapt.scenarios import load
-from robotadapt.sensors import Sensor
-from robotadapt.simulation import RK4, Sampled, simulate
+from robotadapt.sim import RK4, Sampled, simulate
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import sinusoid
 from robotadapt.validation import ConfigError
 

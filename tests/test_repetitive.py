@@ -5,7 +5,7 @@ import pytest
 
 from robotadapt.controllers.repetitive import Repetitive
 from robotadapt.robots import TwoLinkArm
-from robotadapt.scenarios import load
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import exponential_step, sinusoid
 from robotadapt.validation import ConfigError
 
@@ -106,7 +106,7 @@ def test_two_periods_equal_the_equations_written_out(sampled):
 def test_first_period_holds_zero_and_applies_the_feedback_alone():
     """û_d = 0 on [−T, 0) (7.2.32): during the first period the held value is exactly 0 and the torque is
     k_L r + k_v r + k_p e + k_a‖e‖² r, on the single, sampled and batch paths."""
-    from robotadapt.batch import simulate_batch
+    from robotadapt.sim.batch import simulate_batch
 
     s = _short(1).setup
     runs = {"rk4": _short(1).run(), "sampled": _short(1, f"simulation.control_period={T / N_PER!r}").run(),

@@ -18,8 +18,8 @@ import matplotlib.image
 import pytest
 
 from robotadapt.cli import main
-from robotadapt.report import LINEUP, book_scenarios, lineup
-from robotadapt.scenarios import available, load
+from robotadapt.studies.compare import LINEUP, lineup
+from robotadapt.studies.scenarios import available, book_scenarios, load
 
 CHROMIUM = next((p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None)
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",

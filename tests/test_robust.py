@@ -40,7 +40,7 @@ from robotadapt.controllers import (
 from robotadapt.controllers.robust import SignRobust
 from robotadapt.plant import Plant, sinusoidal_disturbance
 from robotadapt.robots import PolarArm, TwoLinkArm
-from robotadapt.scenarios import load
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import Reference, sinusoid
 from robotadapt.validation import ConfigError
 
@@ -362,9 +362,9 @@ def test_wrapper_reports_the_landau_pi_estimate_and_its_passivity_integral():
     the wrapped run is the base's run."""
     from scipy.integrate import simpson
 
-    from robotadapt.adaptation import LandauPI
+    from robotadapt.controllers.adaptation import LandauPI
     from robotadapt.controllers.passivity import PassivityBased, pid_servo
-    from robotadapt.simulation import RK4, simulate
+    from robotadapt.sim import RK4, simulate
 
     K_I, F_P = np.array([[15.0, 2.0], [2.0, 6.0]]), np.array([[2.0, 0.3], [0.3, 1.0]])
     base = PassivityBased(BOOK, pid_servo(2, FULL["Lam"], np.eye(2)), FULL["Kv"], LandauPI(2, K_I, F_P), np.zeros(2))

@@ -1,4 +1,4 @@
-"""Sampled-data control (`robotadapt.simulation.Sampled`, `robotadapt.sampled`): the zero-order hold against the exact
+"""Sampled-data control (`robotadapt.sim.Sampled`, `robotadapt.sim.sampled`): the zero-order hold against the exact
 discretization of a linear loop, the discrete rules of the controller's state, the Ts → 0 limit (first order), the
 stability limit of a sampled loop that is stable in continuous time, and every controller family at its ticks.
 
@@ -25,8 +25,8 @@ from robotadapt.cli import main
 from robotadapt.controllers import PD, InertiaRelated
 from robotadapt.plant import Plant
 from robotadapt.robots import OneLinkArm, TwoLinkArm
-from robotadapt.scenarios import load
-from robotadapt.simulation import RK4, Sampled, simulate
+from robotadapt.sim import RK4, Sampled, simulate
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import constant, sinusoid
 from robotadapt.validation import ConfigError
 
@@ -284,7 +284,7 @@ def test_the_controller_runs_only_at_the_ticks():
 @pytest.mark.slow
 def test_digital_6_3_1_study_fails_between_10_and_15_ms():
     """The study of the scenario: every period up to 10 ms tracks (final |e| < 1e-3), 15 ms and 20 ms diverge."""
-    from robotadapt.study import run_study
+    from robotadapt.studies.study import run_study
 
     runs = run_study(load("digital-6.3.1"))["simulation.control_period"]
     for run in runs:

@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from robotadapt.cli import main
-from robotadapt.scenarios import available, load
+from robotadapt.studies.scenarios import available, load
 from robotadapt.validation import ConfigError
 
 if sys.version_info >= (3, 11):

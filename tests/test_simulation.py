@@ -1,4 +1,4 @@
-"""The simulator (`robotadapt.simulation`): integrators against closed forms, the divergence guard, logging, argument
+"""The simulator (`robotadapt.sim`): integrators against closed forms, the divergence guard, logging, argument
 checks, and what a result writes.
 
 The reference solution is independent of the library: a one-link arm (φ = [m, b], spec §1.4) under PD control
@@ -19,11 +19,14 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from robotadapt.analysis.metrics import metrics
 from robotadapt.controllers import PD
 from robotadapt.plant import Plant
+from robotadapt.report.figures import save_figures
+from robotadapt.report.files import save_result
 from robotadapt.robots import OneLinkArm, PolarArm, TwoLinkArm
-from robotadapt.scenarios import load
-from robotadapt.simulation import RK4, SolveIVP, simulate
+from robotadapt.sim import RK4, SolveIVP, simulate
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import sinusoid
 from robotadapt.validation import ConfigError
 
@@ -183,7 +186,7 @@ def test_runaway_state_stops_the_run_and_keeps_the_samples_before():
     # It stopped at the first step past the bound: that step's time is the last logged one plus dt.
     assert _stop_time(res.status) == pytest.approx(res.t[-1] + 1e-3, abs=1e-9)
     assert np.max(np.abs(np.concatenate([res.q, res.dq, res.x], axis=-1))) <= 1e6
-    assert res.metrics()["status"] == res.status
+    assert metrics(res)["status"] == res.status
 
 
 def test_non_finite_state_stops_at_the_step_that_produced_it():
@@ -355,7 +358,7 @@ def short_run():
 
 def test_result_save_writes_arrays_and_metrics(short_run, tmp_path):
     res = short_run
-    out = res.save(tmp_path / "run", scenario_text="# scenario\n")
+    out = save_result(res, tmp_path / "run", scenario_text="# scenario\n")
     assert out == tmp_path / "run"
     with np.load(out / "result.npz") as npz:
         for key in ("t", "q", "dq", "q_des", "tau", "phi_hat", "V"):
@@ -386,12 +389,12 @@ def test_result_save_refuses_a_folder_under_a_regular_file(short_run, tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("x")
     with pytest.raises(ConfigError) as info:
-        short_run.save(blocker / "out")
+        save_result(short_run, blocker / "out")
     assert info.value.field == "--out"
 
 
 def test_result_plot_writes_three_pngs(short_run, tmp_path):
-    paths = short_run.plot(tmp_path, title="example-6.3.1")
+    paths = save_figures(short_run, tmp_path, title="example-6.3.1")
     names = {"tracking_error.png", "parameters.png", "torques.png"}
     assert {p.name for p in paths} == names
     for name in names:

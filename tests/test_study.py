@@ -5,9 +5,10 @@ import json
 import pytest
 import tomli_w
 
+from robotadapt.analysis.metrics import metrics
 from robotadapt.cli import main
-from robotadapt.scenarios import load
-from robotadapt.study import run_study
+from robotadapt.studies.scenarios import load
+from robotadapt.studies.study import run_study
 from robotadapt.validation import ConfigError
 
 BASE = {
@@ -30,7 +31,7 @@ def test_variants_change_only_their_key(tmp_path):
     path = _write(tmp_path, BASE | {"study": {"controller.Gamma": [1.0, 100.0]}})
     runs = run_study(load(path))["controller.Gamma"]
     assert [r.value for r in runs] == [1.0, 100.0]
-    assert runs[0].result.metrics()["final_phi_error"] != runs[1].result.metrics()["final_phi_error"]
+    assert metrics(runs[0].result)["final_phi_error"] != metrics(runs[1].result)["final_phi_error"]
     base = load(path).run()
     same = run_study(load(_write(tmp_path, BASE | {"study": {"controller.Gamma": [10.0]}})))["controller.Gamma"][0]
     assert (same.result.x == base.x).all()

@@ -1,4 +1,4 @@
-"""Sweeps (`robotadapt.sweep`, `robotadapt sweep`): expansion of grid × random points and their seeds, rows equal to
+"""Sweeps (`robotadapt.studies.sweep`, `robotadapt sweep`): expansion of grid × random points and their seeds, rows equal to
 single runs, resume after an interruption, local processes and a Dask cluster giving the same table, bad input.
 
 Runs are Example 6.3.1 cut to 0.2 s so that a sweep takes well under a second.
@@ -13,11 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from robotadapt import sweep as sweep_module
+from robotadapt.analysis.metrics import metrics
 from robotadapt.cli import main
-from robotadapt.scenarios import load
-from robotadapt.simulation import simulate
-from robotadapt.sweep import (
+from robotadapt.sim import simulate
+from robotadapt.studies import sweep as sweep_module
+from robotadapt.studies.scenarios import load
+from robotadapt.studies.sweep import (
     Point,
     log_every,
     make_sweep,
@@ -99,7 +100,7 @@ def test_rows_are_the_metrics_of_single_runs(tmp_path):
     every `log_every(...)` steps), with the run, its seed and its swept values."""
     s = scenario()
     sw = make_sweep(s, ["controller.phi_hat0=[0,0],[0.5,2]"], ["plant.phi=[0.6,2]:[1,2.6]"], n=2)
-    report = run_sweep(sw, tmp_path, workers=1, plot=False)
+    report = run_sweep(sw, tmp_path, workers=1)
     assert report.computed == 4 and "vectorized" in report.how
     rows = read_table(tmp_path / "runs.jsonl")
     assert list(rows) == [0, 1, 2, 3]
@@ -107,8 +108,8 @@ def test_rows_are_the_metrics_of_single_runs(tmp_path):
     variant = load("example-6.3.1", SHORT + [f"controller.phi_hat0={point.inputs['controller.phi_hat0']}",
                                             f"plant.phi={point.inputs['plant.phi']}"])
     st = variant.setup
-    single = simulate(st.plant, st.controller, st.trajectory, t_final=st.t_final, integrator=st.integrator,
-                      log_every=log_every(st)).metrics()
+    single = metrics(simulate(st.plant, st.controller, st.trajectory, t_final=st.t_final, integrator=st.integrator,
+                              log_every=log_every(st)))
     row = rows[3]
     assert (row["run"], row["seed"], row["controller.phi_hat0"], row["plant.phi"]) == (3, point.seed, [0.5, 2],
                                                                                         point.inputs["plant.phi"])
@@ -122,7 +123,7 @@ def test_rows_are_the_metrics_of_single_runs(tmp_path):
 
 def test_keys_that_do_not_batch_run_scenario_by_scenario(tmp_path):
     sw = make_sweep(scenario(), ["robot.l2=0.9,1.1"])
-    report = run_sweep(sw, tmp_path, workers=1, plot=False)
+    report = run_sweep(sw, tmp_path, workers=1)
     assert report.how.startswith("one scenario per run (plant.model.l2: differs between runs")
     assert [row["status"] for row in report.rows] == ["ok", "ok"]
     assert report.rows[0]["final_abs_error"] != report.rows[1]["final_abs_error"]
@@ -142,7 +143,7 @@ def test_an_interrupted_sweep_resumes_and_gives_the_uninterrupted_table(tmp_path
     chunks finished in."""
     monkeypatch.setattr(sweep_module, "MAX_CHUNK", 2)
     sw = make_sweep(scenario(), ["controller.phi_hat0=[0,0],[0.5,2]"], ["plant.phi=[0.6,2]:[1,2.6]"], n=5)
-    whole = run_sweep(sw, tmp_path / "whole", workers=1, plot=False)
+    whole = run_sweep(sw, tmp_path / "whole", workers=1)
     assert whole.computed == 10
     folder, table = tmp_path / "resumed", tmp_path / "resumed" / "runs.jsonl"
     calls = []
@@ -155,34 +156,34 @@ def test_an_interrupted_sweep_resumes_and_gives_the_uninterrupted_table(tmp_path
 
     monkeypatch.setattr(sweep_module, "run_chunk", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        run_sweep(sw, folder, workers=1, plot=False)
+        run_sweep(sw, folder, workers=1)
     assert len(read_table(table)) == 4
     with table.open("a") as f:
         f.write('{"run": 7, "seed": 1, "status": "o')  # a crash in the middle of an append
     with pytest.raises(KeyboardInterrupt):
-        run_sweep(sw, folder, workers=1, plot=False)
+        run_sweep(sw, folder, workers=1)
     assert sorted(read_table(table)) == [0, 1, 2, 3, 4, 5, 6, 7]
     monkeypatch.setattr(sweep_module, "run_chunk", run_chunk)
-    assert run_sweep(sw, folder, workers=1, plot=False).computed == 2
+    assert run_sweep(sw, folder, workers=1).computed == 2
     assert table_text(folder) == table_text(tmp_path / "whole")
     lines = table_text(folder).splitlines(keepends=True)
     table.write_text("".join(lines[5:] + lines[:5]))  # rows as chunks finishing out of order leave them
-    assert run_sweep(sw, folder, workers=1, plot=False).computed == 0
+    assert run_sweep(sw, folder, workers=1).computed == 0
     assert table_text(folder) == table_text(tmp_path / "whole")
 
 
 def test_another_sweep_into_the_same_folder_is_refused(tmp_path):
-    run_sweep(make_sweep(scenario(), ["controller.phi_hat0=[0,0],[0.5,2]"]), tmp_path, workers=1, plot=False)
+    run_sweep(make_sweep(scenario(), ["controller.phi_hat0=[0,0],[0.5,2]"]), tmp_path, workers=1)
     with pytest.raises(ConfigError, match=r"^--out: .* holds another sweep"):
-        run_sweep(make_sweep(scenario(), ["controller.phi_hat0=[0,0],[0.5,3]"]), tmp_path, workers=1, plot=False)
+        run_sweep(make_sweep(scenario(), ["controller.phi_hat0=[0,0],[0.5,3]"]), tmp_path, workers=1)
 
 
 def test_dask_local_cluster_and_local_processes_give_the_same_table(tmp_path):
     distributed = pytest.importorskip("dask.distributed", reason="the [dist] extra (dask, distributed) is not installed")
     sw = make_sweep(scenario(), ["controller.phi_hat0=[0,0],[0.5,2]"], ["plant.phi=[0.6,2]:[1,2.6]"], n=3)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
-        on_dask = run_sweep(sw, tmp_path / "dask", scheduler=cluster.scheduler_address, plot=False)
-    local = run_sweep(sw, tmp_path / "local", workers=2, plot=False)
+        on_dask = run_sweep(sw, tmp_path / "dask", scheduler=cluster.scheduler_address)
+    local = run_sweep(sw, tmp_path / "local", workers=2)
     assert on_dask.computed == local.computed == 6
     assert table_text(tmp_path / "dask") == table_text(tmp_path / "local")
 
@@ -191,7 +192,7 @@ def test_a_bad_scheduler_address_is_one_clear_error(tmp_path):
     pytest.importorskip("dask.distributed", reason="the [dist] extra (dask, distributed) is not installed")
     sw = make_sweep(scenario(), ["controller.phi_hat0=[0,0],[0.5,2]"])
     with pytest.raises(ConfigError, match=r"^--scheduler: cannot reach 'scheduler-host': missing port number"):
-        run_sweep(sw, tmp_path, scheduler="scheduler-host", plot=False)
+        run_sweep(sw, tmp_path, scheduler="scheduler-host")
 
 
 def test_cli_sweep_writes_table_manifest_and_figure(tmp_path, capsys):

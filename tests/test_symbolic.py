@@ -24,7 +24,7 @@ from robotadapt.robots import TwoLinkArm
 from robotadapt.robots import dh as dh_module
 from robotadapt.robots.base import RobotModel
 from robotadapt.robots.symbolic import SymbolicArm, from_dh_table, planar_arm, puma560
-from robotadapt.scenarios import load
+from robotadapt.studies.scenarios import load
 from robotadapt.validation import ConfigError
 
 SETTINGS = settings(max_examples=25, deadline=None)

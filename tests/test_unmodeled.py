@@ -1,5 +1,5 @@
-"""Dynamics the controller's model lacks (`robotadapt.unmodeled`, `robotadapt.actuators.DCMotor`, a different plant
-model): the payload's parameter change against an independent parallel-axis computation, a payload step and the
+"""Dynamics the controller's model lacks (`robotadapt.plant.unmodeled`, `robotadapt.plant.actuators.DCMotor`, a different
+plant model): the payload's parameter change against an independent parallel-axis computation, a payload step and the
 re-adapting estimate, elastic joints (energy, equilibrium, stiff vs soft), DC motors (stall current, back-EMF damping,
 voltage limit, rotor inertia) and friction the model lacks."""
 
@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 
 from robotadapt._array import matvec
-from robotadapt.actuators import DCMotor
 from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
+from robotadapt.plant.actuators import DCMotor
+from robotadapt.plant.unmodeled import ElasticJoint, Payload
 from robotadapt.robots import OneLinkArm, PolarArm, TwoLinkArm
 from robotadapt.robots.symbolic import SymbolicArm
-from robotadapt.scenarios import load
-from robotadapt.simulation import RK4, simulate
+from robotadapt.sim import RK4, simulate
+from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import sinusoid
-from robotadapt.unmodeled import ElasticJoint, Payload
 from robotadapt.validation import ConfigError
 
 ARM = TwoLinkArm()

@@ -1,1 +1,5 @@
-"""robotadapt."""
+"""robotadapt: adaptive control of rigid robot manipulators (layers: docs/architecture.md)."""
+
+from ._moved import install
+
+install()

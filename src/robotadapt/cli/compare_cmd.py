@@ -12,15 +12,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     compare = sub.add_parser("compare", help="compare controllers on one scenario; write report.html and comparison.json")
     add_scenario_arguments(compare)
     compare.add_argument("--controllers", metavar="A,B,C",
-                         help="comma-separated names from robotadapt.report.LINEUP, e.g. slotine_li,dcal,repetitive "
-                              "(default: every controller that applies; an unknown name lists them all)")
+                         help="comma-separated names from robotadapt.studies.compare.LINEUP, e.g. "
+                              "slotine_li,dcal,repetitive (default: every controller that applies; an unknown name lists "
+                              "them all)")
     compare.add_argument("--out", type=Path, help="output folder (default: results/NAME/compare)")
 
 
 def main(args: argparse.Namespace) -> int:
     """Exit 0 when every controller ran to the end, 1 when one diverged (its partial run is in the report)."""
-    from ..report import compare, table_text, write_comparison
-    from ..scenarios import load
+    from ..report.html import table_text, write_comparison
+    from ..studies.compare import compare
+    from ..studies.scenarios import load
     from ..validation import ConfigError
 
     names = None

@@ -16,7 +16,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Exit 0 when every scenario ran (the book's Example 6.2.2 stops by design and still counts), 1 otherwise."""
-    from ..report import run_gallery
+    from ..report.html import run_gallery
     from ..validation import as_scalar
 
     cap = None if args.t_final is None else as_scalar(args.t_final, "--t-final", positive=True)

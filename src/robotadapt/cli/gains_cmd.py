@@ -19,8 +19,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Exit 0 whenever the conditions could be evaluated, whatever the verdict (certified or not)."""
-    from ..gains import gain_report
-    from ..scenarios import load
+    from ..analysis.gains import gain_report
+    from ..studies.scenarios import load
     from ..validation import as_scalar
 
     radius = as_scalar(args.radius, "--radius", positive=True)

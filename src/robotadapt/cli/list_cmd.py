@@ -10,7 +10,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..scenarios import available
+    from ..studies.scenarios import available
 
     items = available()
     width = max(map(len, items)) if items else 0

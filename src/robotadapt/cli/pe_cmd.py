@@ -21,9 +21,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Exit 0 whatever the verdict; the horizon is the scenario's t_final (--t-final to change it)."""
-    from ..excitation import excitation
-    from ..result import atomic_write, writable_dir
-    from ..scenarios import load
+    from ..analysis.excitation import excitation
+    from ..files import atomic_write, writable_dir
+    from ..studies.scenarios import load
 
     scenario = load(args.scenario, overrides(args))
     s = scenario.setup
@@ -32,7 +32,7 @@ def main(args: argparse.Namespace) -> int:
     verdict = exc.as_dict()
     atomic_write(out / "pe.json", lambda f: json.dump({**verdict, "series": exc.series()}, f, indent=2))
     if not args.no_plots:
-        from ..report import excitation_figure
+        from ..report.html import excitation_figure
 
         excitation_figure(exc, out / "pe.png", scenario.name)
     if args.json:

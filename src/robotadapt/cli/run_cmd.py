@@ -21,32 +21,37 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _study(scenario: Any, out: Path, no_plots: bool) -> None:
     """Run the scenario's [study] variants; write study.json and one overlay figure per varied key."""
-    from ..result import atomic_write
-    from ..study import run_study
-    from ..study import summary as study_summary
+    from ..analysis.metrics import metrics
+    from ..files import atomic_write
+    from ..studies.study import run_study
+    from ..studies.study import summary as study_summary
 
     runs = run_study(scenario, progress=True)
     for group in runs.values():
         for run in group:
-            print(summary(f"  {run.key} = {run.value}", run.result.metrics()))
+            print(summary(f"  {run.key} = {run.value}", metrics(run.result)))
     atomic_write(out / "study.json", lambda f: json.dump(study_summary(runs), f, indent=2))
     if not no_plots:
-        from ..plotting import study
+        from ..report.figures import study
 
         for key, group in runs.items():
             study(key, group, out / f"study_{key.replace('.', '_')}.png", scenario.name)
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..scenarios import load
+    from ..analysis.metrics import metrics
+    from ..report.files import save_result
+    from ..studies.scenarios import load
 
     scenario = load(args.scenario, overrides(args))
     out = args.out if args.out is not None else Path("results") / scenario.name
     result = scenario.run(progress=True)
-    result.save(out, scenario.text)
+    save_result(result, out, scenario.text)
     if not args.no_plots:
-        result.plot(out, title=scenario.name)
-    print(summary(scenario.name, result.metrics()))
+        from ..report.figures import save_figures
+
+        save_figures(result, out, title=scenario.name)
+    print(summary(scenario.name, metrics(result)))
     if scenario.study:
         _study(scenario, out, args.no_plots)
     print(f"wrote {out}/")

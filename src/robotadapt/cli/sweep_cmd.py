@@ -30,7 +30,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _summary(rows: list[dict[str, Any]], keys: list[str], metric: str) -> str:
-    from ..sweep import scalar
+    from ..studies.sweep import scalar
 
     ok = [row for row in rows if row.get("status") == "ok"]
     line = f"{len(ok)} ok, {len(rows) - len(ok)} not finished"
@@ -43,8 +43,8 @@ def _summary(rows: list[dict[str, Any]], keys: list[str], metric: str) -> str:
 
 
 def main(args: argparse.Namespace) -> int:
-    from ..scenarios import load
-    from ..sweep import make_sweep, run_sweep
+    from ..studies.scenarios import load
+    from ..studies.sweep import FIGURE, check_metric, make_sweep, run_sweep
     from ..validation import ConfigError
 
     if args.workers is not None and args.workers < 1:
@@ -52,8 +52,12 @@ def main(args: argparse.Namespace) -> int:
     scenario = load(args.scenario, overrides(args))
     sweep = make_sweep(scenario, args.grid, args.random, args.n, args.seed)
     out = args.out if args.out is not None else Path("results") / f"sweep-{scenario.name}"
-    report = run_sweep(sweep, out, workers=args.workers, scheduler=args.scheduler, metric=args.metric,
-                       plot=not args.no_plots, progress=True)
+    check_metric(scenario.setup, args.metric)
+    report = run_sweep(sweep, out, workers=args.workers, scheduler=args.scheduler, progress=True)
+    if not args.no_plots:
+        from ..report.sweep_figures import summary_figure
+
+        summary_figure(report.rows, sweep.keys, args.metric, Path(out) / FIGURE, sweep.name)
     rate = f", {report.computed / report.seconds:.3g} runs/s" if report.computed else ""
     print(f"sweep {scenario.name}: {len(sweep)} runs ({report.computed} now, {len(sweep) - report.computed} already "
           f"in the table) in {report.seconds:.3g} s{rate}" + (f"; {report.how}" if report.how else ""))

@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 
 from .._array import array_namespace, matvec
-from ..adaptation import UpdateLaw
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_array, as_gain
+from .adaptation import UpdateLaw
 from .base import Array, errors, estimate, freeze, gains
 
 _SERVO = "controller.servo"

@@ -10,14 +10,9 @@ carry exactly the broadcast leading axes. Models are pure: the parameters are ar
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from .._array import array_namespace, matvec, solve
-
-if TYPE_CHECKING:
-    import numpy as np
-
-    from .identifiability import BaseParameters
 
 Array = Any
 
@@ -90,11 +85,3 @@ class RobotModel(ABC):
         xp = array_namespace(q, dq, tau)
         bias = matvec(self.regressor(q, dq, dq, 0.0 * dq), phi)
         return solve(xp, self.mass_matrix(q, phi), tau - bias)
-
-    def base_parameters(self, friction: bool = True, rng: np.random.Generator | None = None, samples: int | None = None,
-                        tol: float | None = None) -> BaseParameters:
-        """The identifiable combinations φ_b = K φ of this model's parameters
-        (:func:`robotadapt.robots.identifiability.base_parameters`)."""
-        from .identifiability import base_parameters
-
-        return base_parameters(self, friction, rng, samples, tol)

@@ -16,8 +16,7 @@ from typing import Any
 
 import tomli_w
 
-from ..study import assignment
-from ..validation import ConfigError
+from ...validation import ConfigError
 from .build import Setup, setup
 
 if sys.version_info >= (3, 11):
@@ -27,6 +26,19 @@ else:  # pragma: no cover
 
 SECTIONS = ("robot", "plant", "trajectory", "controller", "simulation")
 TOP_KEYS = ("description", "notes", "study")
+
+
+def toml_value(value: Any) -> str:
+    """One TOML value on one line; a table as an inline table (`{kind = "pd", Lam = 5}`)."""
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{tomli_w.dumps({k: 0}).split(' = ')[0]} = {toml_value(v)}" for k, v in value.items()) + "}"
+    return tomli_w.dumps({"v": value})[4:].strip()
+
+
+def assignment(key: str, value: Any) -> str:
+    """`key=value` with the value written as TOML (what `--set` parses)."""
+    return f"{key}={toml_value(value)}"
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +72,7 @@ class Scenario:
 
     def run(self, progress: bool = False) -> Any:
         """Simulate this scenario; returns a :class:`~robotadapt.result.SimulationResult`."""
-        from ..simulation import simulate
+        from ...sim.simulation import simulate
 
         s = self.setup
         return simulate(s.plant, s.controller, s.trajectory, t_final=s.t_final, integrator=s.integrator, q0=s.q0,
@@ -79,6 +91,11 @@ def available() -> dict[str, str]:
     for name, path in sorted(_packaged().items()):
         out[name] = str(tomllib.loads(path.read_text(encoding="utf-8")).get("description", ""))
     return out
+
+
+def book_scenarios() -> list[str]:
+    """The packaged scenarios named example-* and problem-*, in order."""
+    return [name for name in available() if name.startswith(("example-", "problem-"))]
 
 
 def parse(text: str, origin: str) -> dict[str, Any]:

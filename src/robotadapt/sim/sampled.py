@@ -24,21 +24,22 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .actuators import Actuator
-from .controllers.base import HasProjection, SimulationStop
-from .sensors import Sensor
-from .simulation import _CHUNK, _diverged, _take
+from ..controllers.base import HasProjection, SimulationStop
+from ..plant.actuators import Actuator
+from ..plant.sensors import Sensor
+from .loop import CHUNK, diverged, take
 
 if TYPE_CHECKING:
-    from .plant import Plant
-    from .simulation import Sampled, _DelayLine, _Loop
-    from .trajectories import Reference, Trajectory
+    from ..plant.plant import Plant
+    from ..trajectories import Reference, Trajectory
+    from .integrators import Sampled
+    from .loop import ClosedLoop, DelayLine
 
 Array = Any
 Rate = Callable[[Array], Array]
 
 
-def _controller(loop: _Loop, t: float, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference, actuator: Actuator,
+def _controller(loop: ClosedLoop, t: float, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference, actuator: Actuator,
                 pending: Any, Ts: float) -> tuple[Array, Array, Any, Array, Rate]:
     """τ_k, the applied u_k and the actuator's next state, ẋ_k, and the map x ↦ ẋ with every other input (u_k too)
     held at its sample. A law that filters the torque (FiltersTorque) filters u_k."""
@@ -86,9 +87,9 @@ def _hold(plant: Plant, t: float, s: Array, u: Array, h: float, substeps: int) -
     return s
 
 
-def integrate(loop: _Loop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: int, log_every: int,
+def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: int, log_every: int,
               max_state: float, progress: bool,
-              line: _DelayLine | None) -> tuple[Array, Array, str, dict[str, Array]]:
+              line: DelayLine | None) -> tuple[Array, Array, str, dict[str, Array]]:
     """Ticks 0 … `n_ticks` from t = 0; returns the logged (t, z), the status and the logged signals (`tau` applied,
     and `tau_commanded` with an actuator, `q_measured`, `dq_measured` with a sensor)."""
     from tqdm import tqdm
@@ -107,10 +108,10 @@ def integrate(loop: _Loop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: 
     with tqdm(total=n_ticks + 1, delay=1.0, disable=not progress, unit="tick", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
         while status == "ok" and start <= n_ticks:
-            count = min(_CHUNK, n_ticks + 1 - start)
+            count = min(CHUNK, n_ticks + 1 - start)
             ref = traj(Ts * (start + np.arange(count)))
             for k in range(start, start + count):
-                t, r = k * Ts, _take(ref, k - start)
+                t, r = k * Ts, take(ref, k - start)
                 q_m, dq_m, ddq_m = measure(s[:n], s[n : 2 * n])
                 try:
                     if line is not None:
@@ -129,7 +130,7 @@ def integrate(loop: _Loop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: 
                     status = f"diverged at t={t:.6g} s: {stop}"
                     break
                 s_new = _hold(plant, t, s, u, h, opts.substeps)
-                reason = _diverged(np.concatenate([s_new, x_new]), max_state)
+                reason = diverged(np.concatenate([s_new, x_new]), max_state)
                 if reason is not None:
                     status = f"diverged at t={t + Ts:.6g} s: {reason}"
                     break

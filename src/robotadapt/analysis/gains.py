@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from .robots.base import RobotModel
-from .validation import ConfigError
+from ..robots.base import RobotModel
+from ..validation import ConfigError
 
 Zeta = tuple[float, float, float, float]
 
@@ -143,8 +143,8 @@ def certify(features: np.ndarray, y: np.ndarray, Kv: float, Kp: float, Ka: float
 def gain_report(controller: Any, phi: np.ndarray, trajectory: Any, t_span: float, radius: float = 1.0,
                 samples: int = 4000) -> GainReport:
     """Sample (7.2.9) and `certify` the gain conditions of a DCAL or repetitive controller."""
-    from .controllers.dcal import DCAL
-    from .controllers.repetitive import Repetitive
+    from ..controllers.dcal import DCAL
+    from ..controllers.repetitive import Repetitive
 
     if not isinstance(controller, DCAL | Repetitive):
         raise ConfigError("controller.kind", "gain conditions (7.2.22)–(7.2.48) are defined for 'dcal' and 'repetitive'")

@@ -1,18 +1,12 @@
-"""The record of one closed-loop run: time-major arrays, named views, status, metrics, files and figures."""
+"""The record of one closed-loop run: time-major arrays, named views and the status (arrays only: metrics come from
+:mod:`robotadapt.analysis`, files and figures from :mod:`robotadapt.report`)."""
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
-
-from .validation import ConfigError
 
 Array = np.ndarray
 
@@ -73,14 +67,8 @@ class SimulationResult:
         truth = self.phi_true
         return None if truth is None else truth - self.phi_hat
 
-    def metrics(self) -> dict[str, Any]:
-        """Tracking, torque, parameter and Lyapunov metrics (see :func:`robotadapt.analysis.metrics`)."""
-        from .analysis import metrics
-
-        return metrics(self)
-
     def arrays(self) -> dict[str, Array]:
-        """Every array of the run by name (what `save` writes to result.npz)."""
+        """Every array of the run by name (what :func:`robotadapt.report.files.save_result` writes to result.npz)."""
         out = {name: getattr(self, name) for name in ("t", "q", "dq", "q_des", "dq_des", "ddq_des", "tau", "x",
                                                          "phi_hat", "e", "de")}
         out["V"] = np.full(self.t.shape, np.nan) if self.V is None else self.V
@@ -92,46 +80,3 @@ class SimulationResult:
             out["passivity"] = self.passivity
         out.update(self.monitors)
         return out
-
-    def save(self, directory: str | os.PathLike[str], scenario_text: str | None = None) -> Path:
-        """Write `result.npz`, `metrics.json` and (if given) `scenario.toml` into `directory`, each atomically."""
-        out = writable_dir(directory)
-        arrays: dict[str, Any] = self.arrays()
-        atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
-        atomic_write(out / "metrics.json", lambda f: json.dump(self.metrics(), f, indent=2))
-        if scenario_text is not None:
-            atomic_write(out / "scenario.toml", lambda f: f.write(scenario_text))
-        return out
-
-    def plot(self, directory: str | os.PathLike[str], title: str = "") -> list[Path]:
-        """Write `tracking_error.png`, `parameters.png` and `torques.png` into `directory`."""
-        from .plotting import save_figures
-
-        return save_figures(self, writable_dir(directory), title)
-
-
-def writable_dir(directory: str | os.PathLike[str]) -> Path:
-    out = Path(directory)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigError("--out", f"cannot create output folder {str(out)!r}: {exc.strerror}") from None
-    if not os.access(out, os.W_OK):
-        raise ConfigError("--out", f"output folder {str(out)!r} is not writable")
-    return out
-
-
-def atomic_write(path: Path, write: Callable[[IO[Any]], Any], binary: bool = False) -> None:
-    """Write through a temporary file in the same folder, then rename: never a truncated file."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb" if binary else "w") as f:
-            write(f)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600: give the file the mode a plain open() would
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from .validation import ConfigError, as_vector
+from ..validation import ConfigError, as_vector
 
 Array = Any
 

@@ -34,14 +34,14 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .batch import NotBatchable, simulate_batch
-from .result import atomic_write, writable_dir
+from ..analysis.metrics import metrics
+from ..files import atomic_write, writable_dir
+from ..sim.batch import NotBatchable, simulate_batch
+from ..sim.simulation import RK4, simulate
+from ..validation import ConfigError, as_array
 from .scenarios import Scenario
 from .scenarios.build import Setup, setup
-from .scenarios.loader import override, parse_value
-from .simulation import RK4, simulate
-from .study import assignment
-from .validation import ConfigError, as_array
+from .scenarios.loader import assignment, override, parse_value
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -195,14 +195,14 @@ def _metrics(setups: list[Setup]) -> tuple[list[dict[str, Any] | ConfigError], s
                                [s.trajectory for s in setups], t_final=first.t_final, integrator=first.integrator,
                                q0=np.stack([s.q0 for s in setups]), dq0=np.stack([s.dq0 for s in setups]),
                                log_every=log_every(first), max_state=first.max_state)
-        return [batch.run(i).metrics() for i in range(len(batch))], "vectorized (simulate_batch)"
+        return [metrics(batch.run(i)) for i in range(len(batch))], "vectorized (simulate_batch)"
     except ConfigError as exc:
         how = f"one scenario per run ({exc})"
     out: list[dict[str, Any] | ConfigError] = []
     for s in setups:
         try:
-            out.append(simulate(s.plant, s.controller, s.trajectory, t_final=s.t_final, integrator=s.integrator,
-                                q0=s.q0, dq0=s.dq0, log_every=log_every(s), max_state=s.max_state).metrics())
+            out.append(metrics(simulate(s.plant, s.controller, s.trajectory, t_final=s.t_final, integrator=s.integrator,
+                                q0=s.q0, dq0=s.dq0, log_every=log_every(s), max_state=s.max_state)))
         except ConfigError as exc:
             out.append(exc)
     return out, how
@@ -293,7 +293,7 @@ def check_metric(s: Setup, metric: str) -> None:
     integrator = replace(s.integrator, backend="numpy") if isinstance(s.integrator, RK4) else s.integrator
     probe = simulate(s.plant, s.controller, s.trajectory, t_final=integrator.dt, integrator=integrator, q0=s.q0,
                      dq0=s.dq0)
-    names = [k for k, v in probe.metrics().items()  # numbers, per-joint lists, or None where not reached yet
+    names = [k for k, v in metrics(probe).items()  # numbers, per-joint lists, or None where not reached yet
              if k != "wall_time_s" and (v is None or not math.isnan(scalar(v)))]
     if metric not in names:
         raise ConfigError("--metric", f"unknown metric {metric!r}; this scenario's runs have {', '.join(names)}")
@@ -345,25 +345,21 @@ def chunk_size(pending: int, slots: int, s: Setup) -> int:
 
 @dataclass(frozen=True, eq=False)
 class SweepReport:
-    """Every row of the table by run, how many were simulated by this call, its wall time, how the chunks ran, and
-    the summary figure."""
+    """Every row of the table by run, how many were simulated by this call, its wall time and how the chunks ran."""
 
     rows: list[dict[str, Any]]
     computed: int
     seconds: float
     how: str
-    figure: Path | None
 
 
 def run_sweep(sweep: Sweep, out: str | os.PathLike[str], *, workers: int | None = None, scheduler: str | None = None,
-              metric: str = "rms_error", plot: bool = True, progress: bool = False) -> SweepReport:
+              progress: bool = False) -> SweepReport:
     """Run the sweep's pending runs into `out` (resuming: rows already in the table are kept, not rerun), on `workers`
     local processes (default: every core; 1 runs in this process) or on the Dask scheduler at `scheduler`."""
     from tqdm import tqdm
 
     base = setup(copy.deepcopy(sweep.data))
-    if plot:
-        check_metric(base, metric)
     folder = writable_dir(out)
     _check_manifest(folder / MANIFEST, sweep.manifest())
     table = folder / TABLE
@@ -382,9 +378,4 @@ def run_sweep(sweep: Sweep, out: str | os.PathLike[str], *, workers: int | None 
                 bar.update(len(rows))
     ordered = [done[i] for i in sorted(done)]
     atomic_write(table, lambda f: f.writelines(json.dumps(row) + "\n" for row in ordered))
-    figure = None
-    if plot:
-        from .sweep_plot import summary_figure
-
-        figure = summary_figure(ordered, sweep.keys, metric, folder / FIGURE, sweep.name)
-    return SweepReport(ordered, len(pending), time.perf_counter() - wall, "; ".join(sorted(hows - {""})), figure)
+    return SweepReport(ordered, len(pending), time.perf_counter() - wall, "; ".join(sorted(hows - {""})))

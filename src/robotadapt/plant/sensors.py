@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .validation import ConfigError, as_scalar, as_vector
+from ..validation import ConfigError, as_scalar, as_vector
 
 Array = Any
 VELOCITY = ("exact", "difference", "filter")

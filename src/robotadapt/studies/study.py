@@ -6,10 +6,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-import tomli_w
+from ..analysis.metrics import metrics
+from .scenarios.loader import assignment
 
 if TYPE_CHECKING:
-    from .result import SimulationResult
+    from ..sim.result import SimulationResult
     from .scenarios import Scenario
 
 
@@ -20,18 +21,6 @@ class StudyRun:
     result: SimulationResult
 
 
-def toml_value(value: Any) -> str:
-    """One TOML value on one line; a table as an inline table (`{kind = "pd", Lam = 5}`)."""
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{tomli_w.dumps({k: 0}).split(' = ')[0]} = {toml_value(v)}" for k, v in value.items()) + "}"
-    return tomli_w.dumps({"v": value})[4:].strip()
-
-
-def assignment(key: str, value: Any) -> str:
-    """`key=value` with the value written as TOML (what `--set` parses)."""
-    return f"{key}={toml_value(value)}"
-
-
 def run_study(scenario: Scenario, progress: bool = False) -> dict[str, list[StudyRun]]:
     """Simulate every variant of the scenario's study, grouped by the varied key."""
     return {key: [StudyRun(key, value, scenario.variant(assignment(key, value)).run(progress)) for value in values]
@@ -40,4 +29,4 @@ def run_study(scenario: Scenario, progress: bool = False) -> dict[str, list[Stud
 
 def summary(runs: dict[str, list[StudyRun]]) -> dict[str, list[dict[str, Any]]]:
     """The metrics of every variant, JSON-ready."""
-    return {key: [{"value": run.value, **run.result.metrics()} for run in group] for key, group in runs.items()}
+    return {key: [{"value": run.value, **metrics(run.result)} for run in group] for key, group in runs.items()}

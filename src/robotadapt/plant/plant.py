@@ -18,12 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from ._array import array_namespace, matvec, solve
+from .._array import array_namespace, matvec, solve
+from ..robots.base import RobotModel
+from ..validation import ConfigError, as_scalar, as_vector
 from .actuators import Actuator, DCMotor
-from .robots.base import RobotModel
 from .sensors import Sensor
 from .unmodeled import ElasticJoint, Payload
-from .validation import ConfigError, as_scalar, as_vector
 
 Array = Any
 Disturbance = Callable[[Array, Array, Array], Array]

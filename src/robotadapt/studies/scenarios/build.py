@@ -15,13 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from ..actuators import Actuator, DCMotor
-from ..plant import Plant, sinusoidal_disturbance
-from ..robots import RobotModel
-from ..sensors import Sensor
-from ..simulation import RK4, Sampled, SolveIVP
-from ..unmodeled import ElasticJoint, Payload
-from ..validation import ConfigError, as_scalar, as_vector, check_names
+from ...plant.actuators import Actuator, DCMotor
+from ...plant.plant import Plant, sinusoidal_disturbance
+from ...plant.sensors import Sensor
+from ...plant.unmodeled import ElasticJoint, Payload
+from ...robots import RobotModel
+from ...sim.integrators import RK4, Sampled, SolveIVP
+from ...validation import ConfigError, as_scalar, as_vector, check_names
 
 # kind → "module:attribute" (imported on use, so optional parts cost nothing until named) and what the constructor
 # takes first: the robot model, the joint count n, the parameter count p, or nothing.

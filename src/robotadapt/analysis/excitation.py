@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from .robots.base import RobotModel
-from .trajectories import Trajectory
-from .validation import ConfigError, as_scalar
+from ..robots.base import RobotModel
+from ..trajectories import Trajectory
+from ..validation import ConfigError, as_scalar
 
 Array = np.ndarray
 RTOL = 1e-6

@@ -1,7 +1,7 @@
 """The compiled backend: the closed loop's fixed-step RK4 under `jax.jit`, time stepping with `lax.scan` (extra `[jax]`).
 
-Nothing here is a second copy of a model or a controller: the step is :func:`robotadapt.simulation._rk4_step` on the
-same `_Loop`, whose models and controllers are written against the array API (`xp = array_namespace(...)`); traced
+Nothing here is a second copy of a model or a controller: the step is :func:`robotadapt.simulation.rk4_step` on the
+same `ClosedLoop`, whose models and controllers are written against the array API (`xp = array_namespace(...)`); traced
 with JAX arrays they build one XLA program. float64 is switched on, so a run equals the numpy backend's to round-off
 (1e-9 is what the tests ask). The reference is sampled by numpy ahead of each chunk of steps and fed to the scan.
 
@@ -27,11 +27,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .trajectories import Reference
-from .validation import ConfigError
+from ..trajectories import Reference
+from ..validation import ConfigError
+from .loop import rk4_step
 
 if TYPE_CHECKING:
-    from .simulation import _Loop
+    from .loop import ClosedLoop
 
 Array = Any
 CHUNK_STEPS = 16384  # most steps per compiled call (the last call is padded)
@@ -88,15 +89,14 @@ def _rebuild(obj: Any, leaves: Iterator[Array]) -> Any:
     return obj
 
 
-_PROGRAMS: dict[Any, tuple[_Loop, Callable[..., Any]]] = {}
+_PROGRAMS: dict[Any, tuple[ClosedLoop, Callable[..., Any]]] = {}
 _MAX_PROGRAMS = 16
 
 
-def _program(loop: _Loop, dt: float, max_state: float) -> tuple[Callable[..., Any], list[Array]]:
+def _program(loop: ClosedLoop, dt: float, max_state: float) -> tuple[Callable[..., Any], list[Array]]:
     """The jitted scan over blocks of steps for loops shaped like this one, and this loop's arrays to call it with.
     Programs are kept by skeleton (tracing costs about a second; the entry holds its loop, so ids in a key stay
     valid), and compiled ones on disk."""
-    from .simulation import _rk4_step
 
     leaves: list[Array] = []
     key = (_skeleton(loop, leaves), dt, max_state)
@@ -106,10 +106,10 @@ def _program(loop: _Loop, dt: float, max_state: float) -> tuple[Callable[..., An
     jnp, lax = jax.numpy, jax.lax
     template = _rebuild(loop, iter(leaves))  # a private copy: later caching on `loop` must not change its layout
 
-    def advance(traced: _Loop, carry: Any, xs: Any) -> tuple[Any, None]:
+    def advance(traced: ClosedLoop, carry: Any, xs: Any) -> tuple[Any, None]:
         z, alive, t_bad, why = carry
         t, r0, rh, r1 = xs
-        z_new = _rk4_step(traced, t, z, dt, Reference(*r0), Reference(*rh), Reference(*r1))
+        z_new = rk4_step(traced, t, z, dt, Reference(*r0), Reference(*rh), Reference(*r1))
         finite = jnp.all(jnp.isfinite(z_new), axis=-1)
         ok = finite & (jnp.max(jnp.abs(z_new), axis=-1) <= max_state)
         now = alive & ~ok
@@ -132,7 +132,7 @@ def _program(loop: _Loop, dt: float, max_state: float) -> tuple[Callable[..., An
     return run, leaves
 
 
-def integrate(loop: _Loop, reference: Callable[[Array], Reference], z0: Array, dt: float, n_steps: int,
+def integrate(loop: ClosedLoop, reference: Callable[[Array], Reference], z0: Array, dt: float, n_steps: int,
               log_every: int, max_state: float) -> tuple[Array, Array, Array, Array, Array]:
     """Fixed-step RK4 of `z0` (`(..., m)`) from t = 0 for the logged part of `n_steps` steps (every `log_every`-th
     state; the steps after the last logged one change nothing logged). `reference(times)` samples q_des, q̇_des, q̈_d.

@@ -25,28 +25,16 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from ._array import array_namespace
-from .controllers import DCAL, AdaptiveComputedTorque, Composite, InertiaRelated, PassivityBased, SimulationStop
-from .controllers.base import HasDelayLine, Prepares
-from .plant import Plant, SinusoidalDisturbance
+from .._array import array_namespace
+from ..controllers import DCAL, AdaptiveComputedTorque, Composite, InertiaRelated, PassivityBased, SimulationStop
+from ..controllers.base import HasDelayLine, Prepares
+from ..plant.plant import Plant, SinusoidalDisturbance
+from ..trajectories import Reference, SumOfSines
+from ..validation import ConfigError, as_array, as_scalar, as_vector
+from .integrators import RK4, Sampled, SolveIVP, check_plant_step
+from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, diverged, diverged_status, rk4_step, take
+from .outputs import outputs
 from .result import SimulationResult
-from .simulation import (
-    _CHUNK,
-    _MAX_LOG_BYTES,
-    RK4,
-    Sampled,
-    SolveIVP,
-    _check_plant_step,
-    _DelayLine,
-    _diverged,
-    _Loop,
-    _outputs,
-    _rk4_step,
-    _take,
-    diverged_status,
-)
-from .trajectories import Reference, SumOfSines
-from .validation import ConfigError, as_array, as_scalar, as_vector
 
 Array = Any
 T = TypeVar("T")
@@ -154,12 +142,9 @@ class BatchResult:
         k, plant = int(self.n_logged[i]), self.plants[i]
         info = {**self.info, "run": i} | ({"plant": plant.describe()} if plant.describe() else {})
         with np.errstate(all="ignore"):
-            return _outputs(_Loop(plant, self.controllers[i], plant.model.n), self.trajectories[i], self.t[:k],
+            return outputs(ClosedLoop(plant, self.controllers[i], plant.model.n), self.trajectories[i], self.t[:k],
                             self.z[:k, i], self.status[i], self.wall_time / len(self), info)
 
-    def metrics(self) -> list[dict[str, Any]]:
-        """Per run, the metrics of :meth:`SimulationResult.metrics` (same keys)."""
-        return [self.run(i).metrics() for i in range(len(self))]
 
 
 def _sequence(value: Any) -> tuple[Any, ...]:
@@ -214,7 +199,7 @@ def _runs(plant: Any, controller: Any, trajectory: Any, q0: Any, dq0: Any, x0: A
         runs_of.setdefault(id(p), []).append(i)
     for idx in runs_of.values():
         plants[idx[0]].check_state(q0s[idx])
-        _check_plant_step(plants[idx[0]], integrator)
+        check_plant_step(plants[idx[0]], integrator)
     s0 = np.stack([p.initial_state(q0s[i], dq0s[i]) for i, p in enumerate(plants)])
     if x0 is None:
         x0s = np.stack([np.asarray(c.initial_state(q0s[i], dq0s[i]), dtype=float) for i, c in enumerate(controllers)])
@@ -240,13 +225,14 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
 
     >>> import numpy as np
     >>> from robotadapt.controllers import InertiaRelated
+    >>> from robotadapt.analysis.metrics import metrics
     >>> from robotadapt.robots import TwoLinkArm
     >>> from robotadapt.trajectories import sinusoid
     >>> arm, rng = TwoLinkArm(), np.random.default_rng(0)
     >>> phis = np.array([0.8, 2.3]) * rng.uniform(0.8, 1.2, size=(20, 2))
     >>> res = simulate_batch([Plant(arm, phi) for phi in phis], InertiaRelated(arm, 2.5, 10, 20, [0, 0]),
     ...                      sinusoid(2), t_final=10, log_every=100)
-    >>> bool(res.ok.all()), res.run(7).metrics()["final_phi_error"] < 1e-3
+    >>> bool(res.ok.all()), metrics(res.run(7))["final_phi_error"] < 1e-3
     (True, True)
     """
     integrator = RK4() if integrator is None else integrator
@@ -260,18 +246,18 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
     dt, (N, n) = integrator.dt, runs.q0.shape
     n_steps = int(np.ceil(t_final / dt - 1e-9))
     log_bytes = 8.0 * (n_steps // log_every + 1) * N * (runs.s0.shape[1] + runs.x0.shape[1])
-    if log_bytes > _MAX_LOG_BYTES:
+    if log_bytes > MAX_LOG_BYTES:
         raise ConfigError("simulation.log_every", f"{N} runs of {n_steps} steps would keep a {log_bytes / 1e9:.3g} GB "
                           "log; log every more steps")
     controllers = _prepared(runs.controllers, runs.trajectories, dt, t_final)
-    loop = _Loop(stack(runs.plants, "plant"), stack(controllers, "controller"), n)
+    loop = ClosedLoop(stack(runs.plants, "plant"), stack(controllers, "controller"), n)
     line = None
     if isinstance(loop.controller, HasDelayLine):
-        line = _DelayLine(np.stack([c.delay_line(dt, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)],
+        line = DelayLine(np.stack([c.delay_line(dt, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)],
                                    axis=1))
 
-    def single(i: int) -> _Loop:
-        return _Loop(runs.plants[i], controllers[i], n)
+    def single(i: int) -> ClosedLoop:
+        return ClosedLoop(runs.plants[i], controllers[i], n)
 
     wall = time.perf_counter()
     traj, z0 = stack(runs.trajectories, "trajectory"), np.concatenate([runs.s0, runs.x0], axis=-1)
@@ -316,19 +302,19 @@ def _stand_in(z: Array, alive: Array) -> Array:
     return xp.where(alive[:, None], z, z[xp.argmax(alive)])
 
 
-def _stopped(single: Callable[[int], _Loop], alive: Array, t: float, z: Array, dt: float,
+def _stopped(single: Callable[[int], ClosedLoop], alive: Array, t: float, z: Array, dt: float,
              refs: tuple[Reference, ...]) -> dict[int, str]:
     """The live runs whose controller or plant raises on this step, found run by run, with the reason."""
     out = {}
     for i in np.flatnonzero(alive):
         try:
-            _rk4_step(single(int(i)), t, z[i], dt, *(_row(r, int(i)) for r in refs))
+            rk4_step(single(int(i)), t, z[i], dt, *(_row(r, int(i)) for r in refs))
         except (SimulationStop, np.linalg.LinAlgError) as stop:
             out[int(i)] = str(stop)
     return out
 
 
-def _compiled(loop: _Loop, traj: Any, z0: Array, dt: float, n_steps: int, log_every: int,
+def _compiled(loop: ClosedLoop, traj: Any, z0: Array, dt: float, n_steps: int, log_every: int,
               max_state: float) -> tuple[Array, Array, Array, list[str]]:
     """:func:`_integrate` compiled by JAX (:mod:`robotadapt.compiled`): the same samples and statuses."""
     from .compiled import integrate
@@ -340,11 +326,11 @@ def _compiled(loop: _Loop, traj: Any, z0: Array, dt: float, n_steps: int, log_ev
     return t[:T], z[:T], n_logged, status
 
 
-def _integrate(loop: _Loop, single: Callable[[int], _Loop], traj: Any, z0: Array, dt: float, n_steps: int,
+def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any, z0: Array, dt: float, n_steps: int,
                log_every: int, max_state: float, progress: bool,
-               line: _DelayLine | None) -> tuple[Array, Array, Array, list[str]]:
+               line: DelayLine | None) -> tuple[Array, Array, Array, list[str]]:
     """Fixed-step RK4 of every run from t = 0; returns the logged (t, z), the number of valid samples per run and the
-    statuses. The per-step math (`_rk4_step`, `_advance`, `_stand_in`) writes into no array; the driver around it
+    statuses. The per-step math (`rk4_step`, `_advance`, `_stand_in`) writes into no array; the driver around it
     (logging, statuses, the run-by-run search when a step raises) is host code."""
     from tqdm import tqdm
 
@@ -356,7 +342,7 @@ def _integrate(loop: _Loop, single: Callable[[int], _Loop], traj: Any, z0: Array
     status = ["ok"] * N
     alive = np.ones(N, dtype=bool)
     z, k_log = z0, 1
-    m_max = int(max(1, min(_CHUNK, _REF_BYTES // (48 * N * z0.shape[1]))))
+    m_max = int(max(1, min(CHUNK, _REF_BYTES // (48 * N * z0.shape[1]))))
 
     def stop(why: dict[int, str]) -> None:
         for i, text in why.items():
@@ -372,14 +358,14 @@ def _integrate(loop: _Loop, single: Callable[[int], _Loop], traj: Any, z0: Array
                 ref = traj((dt * (k + 0.5 * np.arange(2 * min(m_max, n_steps - k) + 1)))[:, None])
                 bar.update(min(m_max, n_steps - k))
             t = k * dt
-            refs = (_take(ref, 2 * j), _take(ref, 2 * j + 1), _take(ref, 2 * j + 2))
+            refs = (take(ref, 2 * j), take(ref, 2 * j + 1), take(ref, 2 * j + 2))
             z_in = z if alive.all() else _stand_in(z, alive)
             if line is not None:
                 z_in = line.sample(loop, k, t, z_in, refs[0])
                 if k % log_every == 0:  # the log at t_k holds the state applied at t_k
                     z_log[k // log_every] = z_in
             try:
-                z_new = _rk4_step(loop, t, z_in, dt, *refs)
+                z_new = rk4_step(loop, t, z_in, dt, *refs)
             except (SimulationStop, np.linalg.LinAlgError):
                 reasons = _stopped(single, alive, t, z_in, dt, refs)
                 if not reasons:
@@ -388,10 +374,10 @@ def _integrate(loop: _Loop, single: Callable[[int], _Loop], traj: Any, z0: Array
                 if not alive.any():
                     break
                 z_in = _stand_in(z_in, alive)
-                z_new = _rk4_step(loop, t, z_in, dt, *refs)
+                z_new = rk4_step(loop, t, z_in, dt, *refs)
             z, now = _advance(z, z_new, alive, max_state)
             if now.any():
-                stop({int(i): f"diverged at t={t + dt:.6g} s: {_diverged(z_new[i], max_state)}"
+                stop({int(i): f"diverged at t={t + dt:.6g} s: {diverged(z_new[i], max_state)}"
                       for i in np.flatnonzero(now)})
             if (k + 1) % log_every == 0:
                 z_log[k_log] = z

@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from .robots.base import RobotModel
-from .validation import ConfigError, as_scalar, as_vector
+from ..robots.base import RobotModel
+from ..validation import ConfigError, as_scalar, as_vector
 
 Array = Any
 _INERTIA = ("Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")

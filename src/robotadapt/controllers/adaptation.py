@@ -16,8 +16,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ._array import array_namespace, quad
-from .validation import as_gain, as_scalar
+from .._array import array_namespace, quad
+from ..validation import as_gain, as_scalar
 
 Array = Any
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -10,10 +11,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from .result import atomic_write  # noqa: E402
+from ..files import atomic_write, writable_dir  # noqa: E402
 
 if TYPE_CHECKING:
-    from .result import SimulationResult
+    from ..sim.result import SimulationResult
 
 
 def _finish(fig: Any, ax: Any, title: str, path: Path) -> Path:
@@ -76,7 +77,9 @@ def torques(res: SimulationResult, path: Path, title: str = "") -> Path:
     return _finish(fig, ax, f"{title} — control input".strip(" —"), path)
 
 
-def save_figures(res: SimulationResult, directory: Path, title: str = "") -> list[Path]:
+def save_figures(res: SimulationResult, directory: str | os.PathLike[str], title: str = "") -> list[Path]:
+    """Write `tracking_error.png`, `parameters.png` and `torques.png` into `directory`."""
+    directory = writable_dir(directory)
     return [tracking_error(res, directory / "tracking_error.png", title),
             parameters(res, directory / "parameters.png", title),
             torques(res, directory / "torques.png", title)]

@@ -11,8 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .result import atomic_write  # noqa: E402
-from .sweep import scalar  # noqa: E402
+from ..files import atomic_write  # noqa: E402
+from ..studies.sweep import scalar  # noqa: E402
 
 
 def _number(v: Any) -> bool:

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from .result import SimulationResult
+    from ..sim.result import SimulationResult
 
 
 def _list(a: Any) -> Any:

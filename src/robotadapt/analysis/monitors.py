@@ -2,7 +2,8 @@
 its bound −β, λ_min(P⁻¹) for least squares (6.6.27), ‖φ̃‖ when the truth is known, and the time the error takes to
 converge.
 
-:func:`controller_series` evaluates the signals that need the controller (at the logged samples of a result);
+:func:`robotadapt.sim.outputs.controller_series` evaluates the signals that need the controller (stored in a result's
+`monitors`);
 :func:`monitor_metrics` turns a result and those signals into JSON-ready numbers.
 """
 
@@ -12,10 +13,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._array import matvec
-
 if TYPE_CHECKING:
-    from .result import SimulationResult
+    from ..sim.result import SimulationResult
 
 Array = np.ndarray
 V_ROUNDOFF = 1e-9  # an increase of V by more than this times V(0) in one step is not round-off
@@ -41,26 +40,6 @@ def convergence_time(t: Array, e: Array, fraction: float = CONVERGED) -> float |
     if above[-1] == norm.size - 1:
         return None
     return float(t[above[-1]])
-
-
-def controller_series(res: SimulationResult, controller: Any) -> dict[str, Array]:
-    """Signals of the run that need its controller, at the logged instants:
-
-    - `parameter_lyapunov`: V_φ(t) = V(t) − ½ rᵀ M(q) r, the parameter part of V (½ φ̃ᵀ Γ⁻¹ φ̃ in (6.3.7) and (6.4.8),
-      ½ φ̃ᵀ P⁻¹ φ̃ in (6.6.29)), for controllers with a passivity output and a known truth. Its initial value is the
-      passivity bound β of (6.4.4): d V_φ/dt = −rᵀ Z φ̃ − (non-negative terms), so ∫₀ᵗ −rᵀ Z φ̃ ≥ −V_φ(0).
-    - `lambda_min_P_inv`: λ_min(P⁻¹(t)) of the least-squares gain (composite law, (6.6.27)); it grows without bound
-      exactly when the infinite-integral condition (6.6.18) holds.
-    """
-    out: dict[str, Array] = {}
-    if res.passivity is not None and res.V is not None and res.r is not None and res.phi is not None:
-        M = controller.model.mass_matrix(res.q, res.phi)
-        out["parameter_lyapunov"] = res.V - 0.5 * (res.r * matvec(M, res.r)).sum(axis=-1)
-    least_squares = next((c for c in (controller, getattr(controller, "base", None))
-                          if hasattr(c, "lambda_min_P_inv")), None)
-    if least_squares is not None:
-        out["lambda_min_P_inv"] = least_squares.lambda_min_P_inv(res.x)
-    return out
 
 
 def monitor_metrics(res: SimulationResult, series: dict[str, Array]) -> dict[str, Any]:

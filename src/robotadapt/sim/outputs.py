@@ -1,0 +1,83 @@
+"""What a run's record holds besides its states, recomputed after integration from the pure maps of the controller and
+the plant, vectorized over the logged instants: torque, V(t), r(t), the passivity integral (6.4.4), φ̂ as the torque
+uses it, and the controller's monitor signals (V_φ(t), λ_min(P⁻¹(t)); spec §11).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+from .._array import matvec
+from ..controllers.base import HasFilteredError, HasInstantEstimate, HasLyapunov, HasRegressor
+from ..trajectories import Trajectory
+from .loop import ClosedLoop
+from .result import SimulationResult
+
+Array = Any
+
+def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status: str, wall: float,
+             info: dict[str, Any], logged: dict[str, Array] | None = None) -> SimulationResult:
+    """Recompute torque, V(t), r(t) and the passivity integral (6.4.4) from the pure maps at the logged instants.
+
+    `logged` (sampled-data mode) holds the torque applied at each logged tick (`tau`) and what the run recorded
+    besides (`tau_commanded`, `q_measured`, `dq_measured`); in continuous time the applied torque is the saturated
+    command. V, r and the passivity integral are evaluated on the true state, φ̂ from what the controller saw. The
+    truth is the plant's φ(t) when the controller's model is the plant's; the result's `phi` is its value at the last
+    sample, and `monitors["phi_true"]` its history when it changed during the run (a payload attached).
+    """
+    ctrl, plant = loop.controller, loop.plant
+    q, dq, x = loop.split(z)
+    ref = trajectory(t)
+    extras = dict(logged or {})
+    if logged is None:
+        commanded = loop.torque(t, z, ref)
+        tau = plant.saturate(commanded)
+        if plant.actuator is not None:
+            extras["tau_commanded"] = commanded
+    else:
+        tau = extras.pop("tau")
+    q_seen, dq_seen = extras.get("q_measured", q), extras.get("dq_measured", dq)
+    phi_hat = (ctrl.phi_hat_at(t, x, q_seen, dq_seen, ref) if isinstance(ctrl, HasInstantEstimate)
+               else ctrl.phi_hat(x))
+    truth = plant.truth_for(ctrl.model, t)
+    phi = None
+    if truth is not None and phi_hat.shape[-1] == plant.model.p:
+        phi = truth[-1] if truth.ndim == 2 else truth
+    known = phi is not None
+    V = ctrl.lyapunov(t, x, q, dq, ref, truth) if isinstance(ctrl, HasLyapunov) and truth is not None else None
+    r = ctrl.filtered_error(t, x, q, dq, ref) if isinstance(ctrl, HasFilteredError) else None
+    passivity = None
+    if isinstance(ctrl, HasRegressor) and known and t.size > 1:
+        Z, r_z = ctrl.regressor(t, x, q, dq, ref)
+        from scipy.integrate import cumulative_simpson  # here: importing the simulator stays light
+
+        passivity = cumulative_simpson(-(r_z * matvec(Z, truth - phi_hat)).sum(axis=-1), x=t, initial=0.0)
+    if known and plant.varies:
+        extras["phi_true"] = truth
+    extras.update(plant.extra_series(z[..., : loop.m]))
+    result = SimulationResult(
+        t=t, q=q, dq=dq, x=x, q_des=ref.q_des, dq_des=ref.dq_des, ddq_des=ref.ddq_des, tau=tau, V=V, r=r,
+        phi_hat=phi_hat, phi=phi, param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
+        state_names=ctrl.state_names, status=status,
+        wall_time=wall, info=info, passivity=passivity,
+    )
+    return replace(result, monitors={**controller_series(result, ctrl), **extras})
+
+
+def controller_series(res: SimulationResult, controller: Any) -> dict[str, Array]:
+    """Signals of the run that need its controller, at the logged instants:
+
+    - `parameter_lyapunov`: V_φ(t) = V(t) − ½ rᵀ M(q) r, the parameter part of V (½ φ̃ᵀ Γ⁻¹ φ̃ in (6.3.7) and (6.4.8),
+      ½ φ̃ᵀ P⁻¹ φ̃ in (6.6.29)), for controllers with a passivity output and a known truth. Its initial value is the
+      passivity bound β of (6.4.4): d V_φ/dt = −rᵀ Z φ̃ − (non-negative terms), so ∫₀ᵗ −rᵀ Z φ̃ ≥ −V_φ(0).
+    - `lambda_min_P_inv`: λ_min(P⁻¹(t)) of the least-squares gain (composite law, (6.6.27)); it grows without bound
+      exactly when the infinite-integral condition (6.6.18) holds.
+    """
+    out: dict[str, Array] = {}
+    if res.passivity is not None and res.V is not None and res.r is not None and res.phi is not None:
+        M = controller.model.mass_matrix(res.q, res.phi)
+        out["parameter_lyapunov"] = res.V - 0.5 * (res.r * matvec(M, res.r)).sum(axis=-1)
+    if hasattr(controller, "lambda_min_P_inv"):  # least squares, or a wrapper around it
+        out["lambda_min_P_inv"] = controller.lambda_min_P_inv(res.x)
+    return out

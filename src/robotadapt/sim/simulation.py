@@ -1,0 +1,197 @@
+"""Closing the loop: plant + controller + desired trajectory, integrated in time (DESIGN "Simulation").
+
+:func:`simulate` validates once, then hands the closed loop (:mod:`robotadapt.sim.loop`) to the integrator asked for
+(:mod:`robotadapt.sim.integrators`): the fixed-step RK4 driver here (numpy) or compiled by JAX
+(:mod:`robotadapt.sim.compiled`), scipy's solve_ivp, or the sampled-data loop (:mod:`robotadapt.sim.sampled`). A
+divergence guard stops a run whose state is non-finite or exceeds `max_state`; the result keeps everything up to there
+and says where and why it stopped. In continuous time, outputs (torque, V, r) are recomputed after integration from the
+pure controller maps, vectorized over time (:mod:`robotadapt.sim.outputs`); a sampled run logs the torque it applied.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from ..controllers.base import Controller, HasDelayLine, NeedsAcceleration, Prepares, SimulationStop
+from ..plant.plant import Plant, same_model
+from ..trajectories import Trajectory
+from ..validation import ConfigError, as_scalar, as_vector
+from .integrators import RK4, Sampled, SolveIVP, check_plant_step
+from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, diverged, diverged_status, rk4_step, take
+from .outputs import outputs
+from .result import SimulationResult
+
+Array = Any
+
+
+def _rk4(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int, max_state: float,
+         progress: bool, line: DelayLine | None) -> tuple[Array, Array, str]:
+    """Fixed-step RK4 from t = 0; returns logged (t, z) and the status."""
+    from tqdm import tqdm
+
+    n_log = n_steps // log_every + 1
+    t_log = np.empty(n_log)
+    z_log = np.empty((n_log,) + z0.shape)
+    t_log[0], z_log[0] = 0.0, z0
+    z, k_log = z0, 1
+    with tqdm(total=n_steps, delay=1.0, disable=not progress, unit="step", leave=False, file=sys.stderr) as bar, \
+            np.errstate(all="ignore"):
+        for start in range(0, n_steps, CHUNK):
+            m = min(CHUNK, n_steps - start)
+            ref = traj(dt * (start + 0.5 * np.arange(2 * m + 1)))
+            for j in range(m):
+                t = (start + j) * dt
+                r0 = take(ref, 2 * j)
+                try:
+                    if line is not None:
+                        z = line.sample(loop, start + j, t, z, r0)
+                        if (start + j) % log_every == 0:  # the log at t_k holds the state applied at t_k
+                            z_log[(start + j) // log_every] = z
+                    z_new = rk4_step(loop, t, z, dt, r0, take(ref, 2 * j + 1), take(ref, 2 * j + 2))
+                except SimulationStop as stop:
+                    return t_log[:k_log], z_log[:k_log], f"diverged at t={t:.6g} s: {stop}"
+                reason = diverged(z_new, max_state)
+                if reason is not None:
+                    return t_log[:k_log], z_log[:k_log], f"diverged at t={t + dt:.6g} s: {reason}"
+                z = z_new
+                if (start + j + 1) % log_every == 0:
+                    t_log[k_log], z_log[k_log] = (start + j + 1) * dt, z
+                    k_log += 1
+            bar.update(m)
+    if line is not None and n_steps % log_every == 0:  # the sample at t_final, logged, not integrated
+        z_log[k_log - 1] = line.sample(loop, n_steps, n_steps * dt, z, take(ref, 2 * m))
+    return t_log[:k_log], z_log[:k_log], "ok"
+
+
+def _rk4_compiled(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int,
+                  max_state: float) -> tuple[Array, Array, str]:
+    """:func:`_rk4` compiled by JAX: the same logged samples and status."""
+    from .compiled import integrate
+
+    t, z, n_logged, t_bad, why = integrate(loop, traj, z0, dt, n_steps, log_every, max_state)
+    return t[:n_logged], z[:n_logged], diverged_status(float(t_bad), int(why), max_state)
+
+
+def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
+               max_state: float) -> tuple[Array, Array, str]:
+    from scipy.integrate import solve_ivp
+
+    def fun(t: float, y: Array) -> Array:
+        return loop(t, y, traj(t))
+
+    def runaway(t: float, y: Array) -> float:
+        return max_state - float(np.max(np.abs(y))) if np.all(np.isfinite(y)) else -1.0
+
+    runaway.terminal = True  # type: ignore[attr-defined]
+    t_eval = opts.dt * np.arange(int(np.floor(t_final / opts.dt + 1e-9)) + 1)
+    try:
+        with np.errstate(all="ignore"):
+            sol = solve_ivp(fun, (0.0, t_eval[-1]), z0, method=opts.method, t_eval=t_eval, rtol=opts.rtol,
+                            atol=opts.atol, events=runaway)
+    except SimulationStop as stop:  # solve_ivp keeps nothing: rerun to just before the stop is not worth it
+        return t_eval[:1], z0[None, :], f"diverged at t=0 s or later: {stop} (use method = 'rk4' to keep the partial run)"
+    t, z = sol.t, sol.y.T
+    finite = np.all(np.isfinite(z), axis=1)
+    t, z = t[np.cumprod(finite).astype(bool)], z[np.cumprod(finite).astype(bool)]
+    if sol.status == 1:
+        return t, z, f"diverged at t={sol.t_events[0][0]:.6g} s: state exceeded {max_state:g} in magnitude"
+    if sol.status == -1:
+        return t, z, f"diverged at t={t[-1] if len(t) else 0.0:.6g} s: {opts.method} failed: {sol.message}"
+    return t, z, "ok"
+
+
+def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajectory: Trajectory, *, t_final: float,
+             integrator: RK4 | SolveIVP | Sampled | None = None, q0: Any = None, dq0: Any = None, x0: Any = None,
+             log_every: int = 1, max_state: float = 1e6, progress: bool = False,
+             info: dict[str, Any] | None = None) -> SimulationResult:
+    """Simulate the closed loop from t = 0 to `t_final` (s).
+
+    `q0, dq0` default to zero, `x0` to `controller.initial_state()`. With :class:`RK4`, the state is logged every
+    `log_every` steps; with :class:`SolveIVP` on its own output grid; with :class:`Sampled` every `log_every` control
+    ticks. The run stops early, keeping its partial result, if the state becomes non-finite or exceeds `max_state`.
+    The plant's sensor, rate limit and delay act at control ticks: they need :class:`Sampled`. The result's `info`
+    records the plant's real-world effects and its model when it is not the controller's (`plant`), and the sampling
+    (`sampling`).
+
+    Examples
+    --------
+    Example 6.3.1: Slotine–Li (Table 6.3.1) on the book's two-link arm, q_d = sin t, the masses learnt from zero:
+
+    >>> from robotadapt.controllers import InertiaRelated
+    >>> from robotadapt.robots import TwoLinkArm
+    >>> from robotadapt.trajectories import sinusoid
+    >>> arm = TwoLinkArm()
+    >>> res = simulate(Plant(arm, [0.8, 2.3]), InertiaRelated(arm, Lam=2.5, Kv=10, Gamma=20, phi_hat0=[0, 0]),
+    ...                sinusoid(2), t_final=10, integrator=RK4(1e-3), log_every=100)
+    >>> res.status, bool(abs(res.e[-1]).max() < 1e-9), res.phi_hat[-1].round(6).tolist()
+    ('ok', True, [0.8, 2.3])
+    """
+    n = plant.model.n
+    if controller.model.n != n:
+        raise ConfigError("controller", f"the controller's model has {controller.model.n} joints, the plant {n}")
+    if trajectory.n != n:
+        raise ConfigError("trajectory", f"the trajectory has {trajectory.n} joints, the robot {n}")
+    integrator = RK4() if integrator is None else integrator
+    t_final = as_scalar(t_final, "simulation.t_final", positive=True)
+    q0 = as_vector(0.0 if q0 is None else q0, n, "plant.q0")
+    dq0 = as_vector(0.0 if dq0 is None else dq0, n, "plant.dq0")
+    x0 = controller.initial_state(q0, dq0) if x0 is None else np.asarray(x0, dtype=float)
+    if not isinstance(log_every, int) or log_every < 1:
+        raise ConfigError("simulation.log_every", f"must be a positive integer, got {log_every!r}")
+    plant.check_state(q0)
+    sampled = isinstance(integrator, Sampled)
+    check_plant_step(plant, integrator)
+    step = integrator.control_period if isinstance(integrator, Sampled) else integrator.dt
+    if isinstance(controller, Prepares):
+        try:
+            controller = controller.prepare(trajectory, step, t_final)
+        except ConfigError as exc:  # sampled, the controller's step is the control period
+            if not sampled or exc.field != "simulation.dt":
+                raise
+            raise ConfigError("simulation.control_period", f"{exc.reason} (the controller's step here is the "
+                              "control period)") from None
+    line = None
+    if isinstance(controller, HasDelayLine):
+        if isinstance(integrator, SolveIVP):
+            raise ConfigError("simulation.method", "a controller with a delay line (repetitive) needs method = 'rk4'")
+        line = DelayLine(np.array(controller.delay_line(step, q0, dq0), dtype=float))
+    loop = ClosedLoop(plant, controller, n)
+    z0 = np.concatenate([plant.initial_state(q0, dq0), x0])
+    info, effects = dict(info or {}), plant.describe()
+    if not same_model(plant.model, controller.model):  # the truth is another model: friction it lacks, a URDF arm
+        effects["model"] = {"class": type(plant.model).__name__, "param_names": list(plant.model.param_names),
+                            "phi": plant.phi.tolist()}
+    if effects:
+        info["plant"] = effects
+    wall = time.perf_counter()
+    logged = None
+    if isinstance(integrator, SolveIVP):
+        t, z, status = _solve_ivp(loop, trajectory, z0, integrator, t_final, max_state)
+    else:
+        n_steps = int(np.ceil(t_final / step - 1e-9))
+        width = z0.size + (4 * n if sampled else 0)
+        log_bytes = 8.0 * (n_steps // log_every + 1) * width
+        if log_bytes > MAX_LOG_BYTES:
+            name = "simulation.control_period" if sampled else "simulation.dt"
+            raise ConfigError(name, f"{n_steps:.3g} steps would keep a {log_bytes / 1e9:.3g} GB log; "
+                              f"use a larger {name.split('.')[1]} or simulation.log_every")
+        if isinstance(integrator, Sampled):
+            from .sampled import integrate
+
+            info["sampling"] = integrator.describe()
+            t, z, status, logged = integrate(loop, trajectory, z0, integrator, n_steps, log_every, max_state,
+                                             progress, line)
+        elif integrator.backend == "jax":
+            if line is not None:
+                raise ConfigError("simulation.backend", "a controller with a delay line (repetitive) keeps it on the "
+                                  "host: use backend = 'numpy'")
+            t, z, status = _rk4_compiled(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state)
+        else:
+            t, z, status = _rk4(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress, line)
+    wall = time.perf_counter() - wall
+    with np.errstate(all="ignore"):  # a diverged run's last samples may overflow in the recomputed outputs
+        return outputs(loop, trajectory, t, z, status, wall, info, logged)
