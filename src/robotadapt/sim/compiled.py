@@ -53,7 +53,7 @@ def jax_module() -> Any:
     return jax
 
 
-def _skeleton(obj: Any, leaves: list[Array]) -> Any:
+def skeleton(obj: Any, leaves: list[Array]) -> Any:
     """A hashable description of `obj` (the closed loop: plant, model, controller, the dataclasses inside) with its
     float arrays moved to `leaves`: two loops with the same skeleton share one compiled program, their gains, true
     parameters and tables passed as arguments. Other values (floats, flags, integer tables) are part of the
@@ -64,9 +64,9 @@ def _skeleton(obj: Any, leaves: list[Array]) -> Any:
             return ("leaf", obj.shape)
         return ("const", obj.shape, obj.dtype.str, obj.tobytes())
     if is_dataclass(obj) and not isinstance(obj, type):
-        return (type(obj), tuple((k, _skeleton(v, leaves)) for k, v in vars(obj).items()))
+        return (type(obj), tuple((k, skeleton(v, leaves)) for k, v in vars(obj).items()))
     if isinstance(obj, tuple | list):
-        return (type(obj), tuple(_skeleton(v, leaves) for v in obj))
+        return (type(obj), tuple(skeleton(v, leaves) for v in obj))
     try:
         hash(obj)
     except TypeError:
@@ -74,18 +74,18 @@ def _skeleton(obj: Any, leaves: list[Array]) -> Any:
     return obj
 
 
-def _rebuild(obj: Any, leaves: Iterator[Array]) -> Any:
-    """`obj` with the arrays `_skeleton` took replaced, in the same order, by `leaves` (shallow copies: the
+def rebuild(obj: Any, leaves: Iterator[Array]) -> Any:
+    """`obj` with the arrays `skeleton` took replaced, in the same order, by `leaves` (shallow copies: the
     dataclasses' validation is not run again on traced values)."""
     if isinstance(obj, np.ndarray):
         return next(leaves) if obj.dtype.kind == "f" else obj
     if is_dataclass(obj) and not isinstance(obj, type):
         new = copy.copy(obj)
         for k, v in vars(obj).items():
-            object.__setattr__(new, k, _rebuild(v, leaves))
+            object.__setattr__(new, k, rebuild(v, leaves))
         return new
     if isinstance(obj, tuple | list):
-        return type(obj)(_rebuild(v, leaves) for v in obj)
+        return type(obj)(rebuild(v, leaves) for v in obj)
     return obj
 
 
@@ -99,12 +99,12 @@ def _program(loop: ClosedLoop, dt: float, max_state: float) -> tuple[Callable[..
     valid), and compiled ones on disk."""
 
     leaves: list[Array] = []
-    key = (_skeleton(loop, leaves), dt, max_state)
+    key = (skeleton(loop, leaves), dt, max_state)
     if key in _PROGRAMS:
         return _PROGRAMS[key][1], leaves
     jax = jax_module()
     jnp, lax = jax.numpy, jax.lax
-    template = _rebuild(loop, iter(leaves))  # a private copy: later caching on `loop` must not change its layout
+    template = rebuild(loop, iter(leaves))  # a private copy: later caching on `loop` must not change its layout
 
     def advance(traced: ClosedLoop, carry: Any, xs: Any) -> tuple[Any, None]:
         z, alive, t_bad, why = carry
@@ -118,7 +118,7 @@ def _program(loop: ClosedLoop, dt: float, max_state: float) -> tuple[Callable[..
 
     @jax.jit
     def run(arrays: list[Array], carry: Any, xs: Any) -> Any:
-        traced = _rebuild(template, iter(arrays))
+        traced = rebuild(template, iter(arrays))
 
         def block(carry: Any, xs: Any) -> tuple[Any, Any]:
             carry, _ = lax.scan(partial(advance, traced), carry, xs)
