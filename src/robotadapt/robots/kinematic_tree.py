@@ -1,0 +1,702 @@
+"""Any serial arm (or tree) from a URDF or a DH table, by recursive Newton–Euler, traceable by JAX.
+
+    τ = M(q) q̈ + V_m(q, q̇) q̇ + G(q) + F(q̇)                              (6.2.1)
+    Y(q, q̇, v, a) φ = M(q) a + V_m(q, q̇) v + G(q) + F(q̇)                 (P3)
+
+The chain holds constants only. Link i's frame is its parent's frame times P_i J_i(q_i) L_i: P_i the joint's fixed
+placement (`rotation`, `translation`), J_i a rotation about (or a translation along) the unit `axis` u_i, and L_i the
+placement of the link frame in the joint frame (`link_rotation`, `link_translation`): the identity for a URDF
+(Pinocchio's joint frame), Tz(d) Tx(a) Rx(α) for a standard DH row (:func:`robotadapt.robots.dh.joint_placements`).
+φ holds 10 standard parameters per link, [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] about the link
+frame's origin in its axes (Pinocchio's order, as :mod:`.pinocchio` and :mod:`.symbolic`), then optional columns per
+joint: rotor inertia I_a q̈ ("Ia1", …), viscous f_v q̇ ("fv1", …), Coulomb f_c sgn q̇ ("fc1", …).
+
+Route: the recursive Newton–Euler algorithm (Luh, Walker & Paul 1980; Featherstone, *Rigid Body Dynamics Algorithms*,
+2008, ch. 5), bilinear in two velocities. Every velocity product of the standard pass (V ×ₘ S q̇, ω × (ω × h), ω × I ω)
+is replaced by its polarisation ½[F(q̇, v) + F(v, q̇)] (Niemeyer & Slotine 1991); the symmetric form B(q̇, v) with
+B(q̇, q̇) = V_m q̇ is unique and equals the Christoffel V_m(q, q̇) v (P2), so ONE pass gives the mixed regressor, and with
+v = q̇ it is the standard pass (checked against Pinocchio's `computeJointTorqueRegressor`, `crba`,
+`computeCoriolisMatrix`, `computeGeneralizedGravity`, `rnea` in tests/test_kinematic_tree.py). Per pass:
+
+    world poses of the links (a loop over the links: the only sequential part),
+    V_i = Σ_j S̃_j q̇_j,  A_i = −g + Σ_j [S̃_j a_j + ½(V_j(q̇) ×ₘ S̃_j v_j + V_j(v) ×ₘ S̃_j q̇_j)]   over the joints j
+        that move link i (a cumulative sum along a chain), S̃_j joint j's motion in world axes,
+    A_i φ_i, link i's wrench (6 × 10, in its own axes, where φ_i is linear), and
+    Y[j, 10 i + c] = S̃_jᵀ (X_i* A_i)[:, c] over the joints j that move link i.
+
+M is the composite-rigid-body algorithm (Featherstone 2008, §6.2) on φ in world axes, V_m column by column (the pass
+with v = e_k, all k at once on an extra axis), G from the subtrees' mass and first moment, τ and the bias from the pass
+contracted with φ. The arrays are laid out per link (`(..., n, 3)`), not per scalar. Measured on the Panda, the same
+algorithm unrolled into scalar code (one array per component, zeros of the geometry dropped, like generated code) gave
+an XLA program with 26,000 multiplies for Y alone (fusion copies the kinematics into each of Y's 490 outputs), and a
+Slotine–Li RK4 step that compiled in 51 s and ran in 825 µs; this layout: 8 s and 100 µs, on the same loaded machine
+(benchmarks/bench_kinematic_tree.py). M by composite rigid bodies measured 2–3 times faster than from the regressor's
+acceleration slot (n passes with a = e_k).
+
+Every method takes leading batch axes and is written with the namespace of its inputs (no writes, no branching on
+values; small products switch between multiply-and-sum and matmul on the static batch size), so the same code runs in
+numpy and under `jax.jit`, `vmap` and `lax.scan` (float64 needs `jax_enable_x64`). The model's constants are numpy
+arrays in `_const`, a dict, which the compiled engine's skeleton keeps as constants.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from os import PathLike
+from pathlib import Path
+from typing import Any
+from xml.etree import ElementTree
+
+import numpy as np
+
+from .._array import array_namespace
+from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
+from .base import Array, RobotModel
+from .dh import LINK_PARAMS, Geometry, joint_placements
+
+EXTRAS = ("rotor_inertia", "viscous", "coulomb")  # optional column groups, in this order after the 10n inertial ones
+EXTRA_NAMES = {"rotor_inertia": "Ia", "viscous": "fv", "coulomb": "fc"}
+LINK_KEYS = ("joint", "a", "alpha", "d", "theta", "m", "com", "inertia", *EXTRAS, "q_limits")
+_MATMUL_ABOVE = 64  # leading size (states × links) above which small products use matmul (see `_many`)
+_PAIRS = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # I_xx, I_xy, I_yy, I_xz, I_yz, I_zz
+# Pinocchio joints this model takes: short name → (kind, axis or None: the joint's own `axis`)
+_PIN_JOINTS: dict[str, tuple[str, tuple[float, ...] | None]] = {f"JointModel{p}{x}": (k, tuple(float(c == x) for c in "XYZ"))
+               for p, k in (("R", "R"), ("RUB", "R"), ("P", "P")) for x in "XYZ"}
+_PIN_JOINTS |= {"JointModelRevoluteUnaligned": ("R", None), "JointModelRevoluteUnboundedUnaligned": ("R", None),
+                "JointModelPrismaticUnaligned": ("P", None)}
+
+
+def _cross(xp: Any, a: Array, b: Array) -> Array:
+    """a × b along the last axis, broadcasting."""
+    a0, a1, a2, b0, b1, b2 = a[..., 0], a[..., 1], a[..., 2], b[..., 0], b[..., 1], b[..., 2]
+    return xp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def _concat(xp: Any, arrays: list[Array]) -> Array:
+    """Concatenate along the last axis, broadcasting the others."""
+    lead = tuple(np.broadcast_shapes(*(a.shape[:-1] for a in arrays)))
+    return xp.concat([xp.broadcast_to(a, lead + a.shape[-1:]) for a in arrays], axis=-1)
+
+
+def _skew(xp: Any, a: Array) -> Array:
+    """[a]×, shape `(..., 3, 3)`: [a]× b = a × b."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    z = 0.0 * a0
+    return xp.stack([xp.stack([z, -a2, a1], axis=-1), xp.stack([a2, z, -a0], axis=-1),
+                     xp.stack([-a1, a0, z], axis=-1)], axis=-2)
+
+
+def _many(A: Array) -> bool:
+    """Whether products over the leading axes of A go to matmul: measured faster under XLA for many states (batches),
+    slower for one (where multiply-and-sum fuses with its neighbours). Shapes are static: a trace-time choice."""
+    return math.prod(A.shape[:-2]) > _MATMUL_ABOVE
+
+
+def _mm(A: Array, B: Array) -> Array:
+    """A B over leading axes (small matrices)."""
+    return A @ B if _many(A) else (A[..., :, :, None] * B[..., None, :, :]).sum(axis=-2)
+
+
+def _mv(R: Array, x: Array) -> Array:
+    """R x over leading axes."""
+    return (R @ x[..., None])[..., 0] if _many(R) else (R * x[..., None, :]).sum(axis=-1)
+
+
+def _mtv(R: Array, x: Array) -> Array:
+    """Rᵀ x over leading axes: a world vector in link axes."""
+    return (x[..., None, :] @ R)[..., 0, :] if _many(R) else (R * x[..., :, None]).sum(axis=-2)
+
+
+def _sym(xp: Any, six: Array) -> Array:
+    """The symmetric 3×3 of the entries [xx, xy, yy, xz, yz, zz] on the last axis."""
+    xx, xy, yy, xz, yz, zz = (six[..., k] for k in range(6))
+    return xp.stack([xp.stack([xx, xy, xz], axis=-1), xp.stack([xy, yy, yz], axis=-1),
+                     xp.stack([xz, yz, zz], axis=-1)], axis=-2)
+
+
+def _pair_columns(xp: Any, x: Array) -> Array:
+    """E_c x for the six inertia entries c (E_c the symmetric unit tensor), shape `(..., 6, 3)`."""
+    x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
+    z = 0.0 * x0
+    return xp.stack([xp.stack(c, axis=-1) for c in ((x0, z, z), (x1, x0, z), (z, x1, z), (x2, z, x0), (z, x2, x1),
+                                                    (z, z, x2))], axis=-2)
+
+
+def _ldl_solve(xp: Any, M: Array, b: Array) -> Array:
+    """x with M x = b over leading axes, M symmetric, by M = L D Lᵀ unrolled over the entries (no pivoting)."""
+    n = M.shape[-1]
+    L: list[list[Any]] = [[None] * n for _ in range(n)]
+    D: list[Any] = []
+    for j in range(n):
+        D.append(M[..., j, j] - sum((L[j][k] * L[j][k] * D[k] for k in range(j)), 0.0))
+        for i in range(j + 1, n):
+            L[i][j] = (M[..., i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)), 0.0)) / D[j]
+    y: list[Any] = []
+    for i in range(n):
+        y.append(b[..., i] - sum((L[i][k] * y[k] for k in range(i)), 0.0))
+    x: list[Any] = [None] * n
+    for i in reversed(range(n)):
+        x[i] = y[i] / D[i] - sum((L[k][i] * x[k] for k in range(i + 1, n)), 0.0)
+    return xp.stack(xp.broadcast_arrays(*x), axis=-1)
+
+
+def _link(kind: str, PR: Array, Pp: Array, u: Array, LR: Array, Lp: Array) -> tuple[Array, ...]:
+    """(C_c, C_s, C_1, p_c, p_s, p_1, p_q, σ, s): the link frame in its parent's is R = C_c cos q + C_s sin q + C_1,
+    p = p_c cos q + p_s sin q + p_1 + p_q q; S = [σ; s] the joint's motion in link axes at the link origin."""
+    zero3, zero33 = np.zeros(3), np.zeros((3, 3))
+    if kind == "R":  # Rot(u, q) = cos q (1 − u uᵀ) + sin q [u]× + u uᵀ
+        uu, K = np.outer(u, u), np.cross(np.eye(3), u)  # K = [u]×: row i is e_i × u = −u × e_i
+        sigma = LR.T @ u
+        return (PR @ (np.eye(3) - uu) @ LR, PR @ K @ LR, PR @ uu @ LR, PR @ (np.eye(3) - uu) @ Lp, PR @ K @ Lp,
+                Pp + PR @ uu @ Lp, zero3, sigma, np.cross(-LR.T @ Lp, sigma))  # s = r × σ, r the joint origin
+    return zero33, zero33, PR @ LR, zero3, zero3, Pp + PR @ Lp, PR @ u, zero3, LR.T @ u
+
+
+@dataclass(frozen=True, eq=False)
+class _Kin:
+    """World poses of the links (R0 `(..., n, 3, 3)`, p0 `(..., n, 3)`) and the joints' motion S̃_j = [u_j; x_j] in world
+    axes at the world origin."""
+
+    R0: Array
+    p0: Array
+    u: Array
+    x: Array
+
+    def expand(self) -> _Kin:
+        """An axis before the links' (for passes over unit vectors e_k)."""
+        return _Kin(self.R0[..., None, :, :, :], self.p0[..., None, :, :], self.u[..., None, :, :], self.x[..., None, :, :])
+
+
+@dataclass(frozen=True, eq=False)
+class _Motion:
+    """One Newton–Euler pass in link axes, bilinear in two velocities (slot 1 q̇, slot 2 v; `same` when v = q̇): angular
+    and linear (origin) velocities per slot (None: zero), angular acceleration (None: zero) and the classical
+    acceleration of the origin (gravity as −g at the base), each `(..., n, 3)`."""
+
+    w: Array  # each of w, wv, lin, alpha may be None (zero)
+    wv: Array
+    lin: Array
+    alpha: Array
+    acc: Array
+    same: bool
+
+
+@dataclass(frozen=True, eq=False)
+class KinematicTree(RobotModel):
+    """A chain (or tree) of revolute ('R') and prismatic ('P') joints: constants only, every method traceable.
+
+    Per joint: `parents` (index of the parent joint, −1 for the base; parents come first), `rotation` (n, 3, 3) and
+    `translation` (n, 3) the joint frame in the parent link's frame at q = 0, `axis` (n, 3) unit, in the joint frame,
+    `link_rotation`, `link_translation` the link frame in the joint frame; `g` the gravity vector (m/s², base axes);
+    `link_params` (n, 10) the standard parameters `default_phi` starts with; `rotor_inertia`, `viscous`, `coulomb`
+    (n,) or None: the column groups present and their default values; `joint_names`, `q_limits` (n, 2), `name`
+    informative. Build one with :meth:`from_urdf`, :meth:`example`, :meth:`from_pinocchio`, :meth:`from_dh` or
+    :meth:`from_symbolic`; `dataclasses.replace` makes variants.
+    """
+
+    joints: str
+    parents: tuple[int, ...]
+    rotation: Any
+    translation: Any
+    axis: Any
+    link_rotation: Any
+    link_translation: Any
+    g: Any
+    link_params: Any
+    rotor_inertia: Any = None
+    viscous: Any = None
+    coulomb: Any = None
+    joint_names: tuple[str, ...] = ()
+    q_limits: Any = None
+    name: str = "chain"
+    _const: dict[str, Array] = field(init=False, repr=False)
+    _chain: bool = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.joints, str) or not self.joints or set(self.joints) - {"R", "P"}:
+            raise ConfigError("robot.joints", f"expected a string of 'R' (revolute) and 'P' (prismatic), got "
+                              f"{self.joints!r}")
+        n, set_ = len(self.joints), object.__setattr__
+        try:
+            parents = tuple(int(j) for j in self.parents)
+        except (TypeError, ValueError):
+            parents = ()
+        if len(parents) != n or any(not -1 <= j < i for i, j in enumerate(parents)):
+            raise ConfigError("robot.parents", f"expected {n} parent indices, each −1 (the base) or an earlier joint, "
+                              f"got {self.parents!r}")
+        set_(self, "parents", parents)
+        for name, shape in (("rotation", (n, 3, 3)), ("translation", (n, 3)), ("axis", (n, 3)),
+                            ("link_rotation", (n, 3, 3)), ("link_translation", (n, 3)), ("link_params", (n, 10))):
+            arr = as_array(getattr(self, name), f"robot.{name}")
+            if arr.shape != shape:
+                raise ConfigError(f"robot.{name}", f"expected shape {shape}, got {arr.shape}")
+            set_(self, name, arr)
+        for name in ("rotation", "link_rotation"):
+            R = getattr(self, name)
+            if np.abs(R @ np.swapaxes(R, -1, -2) - np.eye(3)).max() > 1e-9 or np.any(np.linalg.det(R) < 0):
+                raise ConfigError(f"robot.{name}", "every entry must be a rotation matrix (orthonormal, det +1)")
+        if np.abs(np.linalg.norm(self.axis, axis=-1) - 1.0).max() > 1e-9:
+            raise ConfigError("robot.axis", f"every joint axis must be a unit vector, got {self.axis.tolist()}")
+        set_(self, "g", as_vector(self.g, 3, "robot.g", broadcast=False))
+        for name in EXTRAS:
+            if getattr(self, name) is not None:
+                values = as_vector(getattr(self, name), n, f"robot.{name}")
+                if np.any(values < 0):
+                    raise ConfigError(f"robot.{name}", f"must be zero or positive, got {values}")
+                set_(self, name, values)
+        if self.q_limits is not None:
+            limits = np.asarray(self.q_limits, dtype=float)
+            if limits.shape != (n, 2) or np.any(np.isnan(limits)) or np.any(limits[:, 0] >= limits[:, 1]):
+                raise ConfigError("robot.q_limits", f"expected {n} rows [lower, upper] with lower < upper")
+            set_(self, "q_limits", limits)
+        names = tuple(str(x) for x in self.joint_names) or tuple(f"joint{i + 1}" for i in range(n))
+        if len(names) != n:
+            raise ConfigError("robot.joint_names", f"expected {n} names, got {len(names)}")
+        set_(self, "joint_names", names)
+        per_link = zip(*(_link(self.joints[i], self.rotation[i], self.translation[i], self.axis[i], self.link_rotation[i],
+                               self.link_translation[i]) for i in range(n)), strict=True)
+        const = dict(zip(("Cc", "Cs", "C1", "pc", "ps", "p1", "pq", "sigma", "s"), map(np.array, per_link), strict=True))
+        down = np.eye(n)  # down[j, i] = 1 when joint j moves link i (j is i or an ancestor)
+        for i, k in enumerate(parents):
+            if k >= 0:
+                down[:, i] += down[:, k]
+        const |= {"down": down, "up": down.T.copy(), "minus_g": -self.g, "eye": np.eye(n)}
+        set_(self, "_const", const)
+        set_(self, "_chain", parents == tuple(range(-1, n - 1)))
+
+    # -- construction -------------------------------------------------------------------------------------------------
+
+    @classmethod
+    def from_pinocchio(cls, model: Any, rotor_inertia: bool = False, viscous: bool = False, coulomb: bool = False,
+                       name: str = "pinocchio") -> KinematicTree:
+        """The chain (or tree) of a `pinocchio.Model` of revolute, continuous and prismatic joints (any axis); φ about
+        each joint frame (Pinocchio's); `default_phi` from its inertias, then `armature`, `damping`, `friction`."""
+        return cls._from_model(model, rotor_inertia, viscous, coulomb, name, "robot.model")
+
+    @classmethod
+    def _from_model(cls, model: Any, rotor_inertia: bool, viscous: bool, coulomb: bool, name: str,
+                    field_: str) -> KinematicTree:
+        flags = {"rotor_inertia": rotor_inertia, "viscous": viscous, "coulomb": coulomb}
+        for key, flag in flags.items():
+            check_switch(flag, f"robot.{key}")
+        kinds, axes, bad = [], [], []
+        for j in range(1, model.njoints):
+            short = model.joints[j].shortname()
+            if short not in _PIN_JOINTS:
+                bad.append(f"{model.names[j]!r} ({short.removeprefix('JointModel')})")
+                continue
+            kind, axis = _PIN_JOINTS[short]
+            kinds.append(kind)
+            axes.append(axis if axis is not None else np.asarray(model.joints[j].extract().axis, dtype=float))
+        if bad:
+            raise ConfigError(field_, f"joint {', '.join(bad)} is not revolute, continuous or prismatic: make it fixed, "
+                              "or lock it (robot.locked)")
+        if not kinds:
+            raise ConfigError(field_, "the model has no moving joint")
+        joints = range(1, model.njoints)
+        limits = np.array([[model.lowerPositionLimit[model.idx_qs[j]], model.upperPositionLimit[model.idx_qs[j]]]
+                           if model.joints[j].nq == 1 else [-np.inf, np.inf] for j in joints])
+        q_limits = limits if np.all(limits[:, 0] < limits[:, 1]) else None
+        placements = [model.jointPlacements[j] for j in joints]
+        n = len(kinds)
+        extras = {"rotor_inertia": model.armature, "viscous": model.damping, "coulomb": model.friction}
+        return cls("".join(kinds), tuple(int(model.parents[j]) - 1 for j in joints),
+                   np.array([X.rotation for X in placements]), np.array([X.translation for X in placements]),
+                   np.array(axes), np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3)), np.array(model.gravity.linear),
+                   np.array([model.inertias[j].toDynamicParameters() for j in joints]),
+                   **{k: np.array(v, dtype=float) if flags[k] else None for k, v in extras.items()},
+                   joint_names=tuple(model.names[1:]), q_limits=q_limits, name=name)
+
+    @classmethod
+    def from_urdf(cls, path: str | PathLike[str], locked: Sequence[str] = (), rotor_inertia: bool = False,
+                  viscous: bool = False, coulomb: bool = False, gravity: Any = None) -> KinematicTree:
+        """The arm of the URDF file `path` read by Pinocchio, with the joints named in `locked` fixed at their neutral
+        position (grippers), optional column groups (defaults from the URDF's `<dynamics damping friction>`), and
+        `gravity` (m/s², base axes; default (0, 0, −9.81))."""
+        try:
+            import pinocchio as pin
+        except ImportError:
+            raise ConfigError("robot.urdf", "URDF robots need Pinocchio: pip install 'robotadapt[urdf]'") from None
+        if not isinstance(path, str | PathLike):
+            raise ConfigError("robot.urdf", f"expected the path of a URDF file, got {path!r}")
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError("robot.urdf", f"no file at {str(path)!r}: give the path of an existing .urdf file")
+        try:  # checked first: urdfdom writes its own parse errors to stderr
+            root = ElementTree.parse(path).getroot()
+        except ElementTree.ParseError as exc:
+            raise ConfigError("robot.urdf", f"{str(path)!r} is not an XML file ({exc}): give a URDF file") from None
+        if root.tag != "robot":
+            raise ConfigError("robot.urdf", f"{str(path)!r} is not a URDF (root <{root.tag}>, not <robot>)")
+        try:
+            model = pin.buildModelFromUrdf(str(path))
+        except (RuntimeError, ValueError) as exc:
+            raise ConfigError("robot.urdf", f"Pinocchio cannot read {str(path)!r}: {exc}") from None
+        if isinstance(locked, str) or not isinstance(locked, Sequence) or not all(isinstance(j, str) for j in locked):
+            raise ConfigError("robot.locked", f"expected a list of joint names, got {locked!r}")
+        if locked:
+            names = list(model.names)
+            missing = [j for j in locked if j not in names[1:]]
+            if missing:
+                raise ConfigError("robot.locked", f"no joint named {', '.join(map(repr, missing))} in {path.name}; "
+                                  f"its joints: {', '.join(names[1:])}")
+            model = pin.buildReducedModel(model, [names.index(j) for j in locked], pin.neutral(model))
+        if gravity is not None:
+            model.gravity = pin.Motion(as_vector(gravity, 3, "robot.gravity", broadcast=False), np.zeros(3))
+        return cls._from_model(model, rotor_inertia, viscous, coulomb, path.stem, "robot.urdf")
+
+    @classmethod
+    def example(cls, name: str, locked: Sequence[str] = (), rotor_inertia: bool = False, viscous: bool = False,
+                coulomb: bool = False) -> KinematicTree:
+        """An arm of `example-robot-data` (offline, `robotadapt.robots.pinocchio.EXAMPLES`), grippers locked."""
+        from .pinocchio import EXAMPLES
+
+        if not isinstance(name, str) or name not in EXAMPLES:
+            raise ConfigError("robot.name", f"unknown example robot {name!r}; known: {', '.join(EXAMPLES)}")
+        try:
+            dist = importlib.metadata.distribution("example-robot-data")
+        except importlib.metadata.PackageNotFoundError:
+            raise ConfigError("robot.kind", "example robots need example-robot-data: pip install 'robotadapt[urdf]'"
+                              ) from None
+        relative, gripper = EXAMPLES[name]
+        path = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))) / relative
+        return replace(cls.from_urdf(path, tuple(gripper) + tuple(locked), rotor_inertia, viscous, coulomb), name=name)
+
+    @classmethod
+    def from_dh(cls, links: Sequence[dict[str, Any]], convention: str = "standard",
+                g: Any = (0.0, 0.0, -9.81)) -> KinematicTree:
+        """An arm from DH rows, the link tables of :func:`robotadapt.robots.symbolic.from_dh_table` (`joint`, `a`,
+        `alpha`, `d`, `theta`, `m`, `com`, `inertia` about the centre of mass, optional `rotor_inertia`, `viscous`,
+        `coulomb`, `q_limits`); φ in each link's DH frame, as :class:`robotadapt.robots.symbolic.SymbolicArm`.
+        Standard: frame i = frame i−1 · Rz(θ) Tz(d) Tx(a) Rx(α); modified (Craig): Rx(α) Tx(a) Rz(θ) Tz(d)."""
+        if isinstance(links, dict | str) or not isinstance(links, Sequence) or not links:
+            raise ConfigError("robot.links", "expected a list of link tables ([[robot.links]] in TOML), one per joint")
+        if convention not in ("standard", "modified"):
+            raise ConfigError("robot.convention", f"expected 'standard' or 'modified', got {convention!r}")
+        rows: dict[str, list[Any]] = {k: [] for k in ("joint", "a", "alpha", "d", "theta", "params")}
+        for i, link in enumerate(links):
+            where = f"robot.links[{i}]"
+            if not isinstance(link, dict):
+                raise ConfigError(where, f"expected a table with keys {', '.join(LINK_KEYS)}, got {link!r}")
+            check_names(list(link), LINK_KEYS, where)
+            if link.get("joint", "R") not in ("R", "P"):
+                raise ConfigError(f"{where}.joint", f"expected 'R' (revolute) or 'P' (prismatic), got {link['joint']!r}")
+            if "m" not in link:
+                raise ConfigError(f"{where}.m", "missing: the link's mass in kg")
+            rows["joint"].append(link.get("joint", "R"))
+            for key in ("a", "alpha", "d", "theta"):
+                rows[key].append(as_scalar(link.get(key, 0.0), f"{where}.{key}"))
+            m = as_scalar(link["m"], f"{where}.m", nonnegative=True)
+            c = as_vector(link.get("com", 0.0), 3, f"{where}.com")
+            inertia = as_array(link.get("inertia", np.zeros(3)), f"{where}.inertia")
+            inertia = np.diag(inertia) if inertia.shape == (3,) else inertia
+            if inertia.shape != (3, 3):
+                raise ConfigError(f"{where}.inertia", f"expected 3 principal moments or a 3x3 tensor, got {inertia.shape}")
+            check_spd(inertia, f"{where}.inertia", semidefinite=True)
+            I_o = inertia + m * (c @ c * np.eye(3) - np.outer(c, c))  # about the frame origin (parallel axes)
+            rows["params"].append([m, *(m * c), *(I_o[j, k] for j, k in _PAIRS)])
+        extras = {key: [as_scalar(link.get(key, 0.0), f"robot.links[{i}].{key}", nonnegative=True)
+                        for i, link in enumerate(links)] for key in EXTRAS if any(key in link for link in links)}
+        limits = [link.get("q_limits") for link in links]
+        if any(x is not None for x in limits) and not all(x is not None for x in limits):
+            raise ConfigError("robot.links", "q_limits must be given on every link or on none")
+        gravity = as_vector(g, 3, "robot.g", broadcast=False)
+        geo = Geometry("".join(rows["joint"]), tuple(rows["a"]), tuple(rows["alpha"]), tuple(rows["d"]),
+                       tuple(rows["theta"]), convention == "modified", (gravity[0], gravity[1], gravity[2]))
+        pre, post = zip(*joint_placements(geo), strict=True)
+        n = geo.n
+        return cls(geo.joints, tuple(range(-1, n - 1)), np.array([T[:3, :3] for T in pre]),
+                   np.array([T[:3, 3] for T in pre]), np.tile([0.0, 0.0, 1.0], (n, 1)), np.array([T[:3, :3] for T in post]),
+                   np.array([T[:3, 3] for T in post]), gravity, np.array(rows["params"]),
+                   extras.get("rotor_inertia"), extras.get("viscous"), extras.get("coulomb"),
+                   q_limits=None if limits[0] is None else as_array(limits, "robot.q_limits"), name="dh")
+
+    @classmethod
+    def from_symbolic(cls, arm: Any) -> KinematicTree:
+        """The same arm as a :class:`robotadapt.robots.symbolic.SymbolicArm` (same φ, same columns), without sympy."""
+        links = []
+        for i, kind in enumerate(arm.joints):
+            link = {"joint": kind, "a": arm.a[i], "alpha": arm.alpha[i], "d": arm.d[i], "theta": arm.theta[i],
+                    "m": arm.mass[i], "com": arm.com[i], "inertia": arm.inertia[i]}
+            link |= {key: getattr(arm, key)[i] for key in EXTRAS if getattr(arm, key) is not None}
+            if arm.q_limits is not None:
+                link["q_limits"] = arm.q_limits[i]
+            links.append(link)
+        return cls.from_dh(links, arm.convention, arm.g)
+
+    # -- structure ----------------------------------------------------------------------------------------------------
+
+    @property
+    def n(self) -> int:
+        return len(self.joints)
+
+    @property
+    def extras(self) -> tuple[str, ...]:
+        """The optional column groups present, in order."""
+        return tuple(name for name in EXTRAS if getattr(self, name) is not None)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        names = [f"{p}{i + 1}" for i in range(self.n) for p in LINK_PARAMS]
+        return tuple(names + [f"{EXTRA_NAMES[e]}{i + 1}" for e in self.extras for i in range(self.n)])
+
+    @property
+    def default_phi(self) -> Array:
+        """The chain's own parameters: `link_params` (URDF inertials or DH link data), then the extras' values."""
+        xp = array_namespace(self.link_params)  # numpy; traced arrays when the compiled engine swaps the fields
+        return xp.concat([xp.reshape(self.link_params, (-1,))] + [getattr(self, e) for e in self.extras])
+
+    # -- the recursion --------------------------------------------------------------------------------------------------
+
+    def _kinematics(self, xp: Any, q: Array) -> _Kin:
+        """World poses by the chain of link transforms (a loop over the links) and the joints' world motion S̃_j."""
+        k = self._const
+        c, s = xp.cos(q)[..., None], xp.sin(q)[..., None]
+        R = c[..., None] * k["Cc"] + s[..., None] * k["Cs"] + k["C1"]
+        p = c * k["pc"] + s * k["ps"] + k["p1"] + q[..., None] * k["pq"]
+        R0: list[Array] = []
+        p0: list[Array] = []
+        for i, parent in enumerate(self.parents):
+            Ri, pi = R[..., i, :, :], p[..., i, :]
+            if parent < 0:
+                R0.append(Ri)
+                p0.append(pi)
+            else:
+                R0.append(_mm(R0[parent], Ri))
+                p0.append(p0[parent] + _mv(R0[parent], pi))
+        R0s, p0s = xp.stack(R0, axis=-3), xp.stack(p0, axis=-2)
+        u = _mv(R0s, k["sigma"])
+        return _Kin(R0s, p0s, u, _mv(R0s, k["s"]) + _cross(xp, p0s, u))
+
+    def _pass(self, xp: Any, kin: _Kin, dq: Array, v: Array, a: Array, gravity: bool) -> _Motion:
+        """The Newton–Euler forward pass in world axes, bilinear in (q̇, v) (v None: v = q̇; None elsewhere: zero):
+        V_i = Σ_j S̃_j q̇_j,  A_i = −g + Σ_j [S̃_j a_j + ½(V_j(q̇) ×ₘ S̃_j v_j + V_j(v) ×ₘ S̃_j q̇_j)] over the joints j
+        that move link i, then in link i's axes. Quantities go through the sums and rotations stacked (fewer kernels)."""
+        same, u, x, p0 = v is None, kin.u, kin.x, kin.p0
+        S = xp.concat([u, x], axis=-1)
+        w = wv = lin = linv = accel = None
+        if dq is not None:
+            V = self._ancestors(xp, dq[..., None] * S if same else _concat(xp, [dq[..., None] * S, v[..., None] * S]))
+            w, lin = V[..., 0:3], V[..., 3:6]
+            wv, linv, vs = (w, lin, dq) if same else (V[..., 6:9], V[..., 9:12], v)
+            accel = vs[..., None] * _concat(xp, [_cross(xp, w, u), _cross(xp, w, x) + _cross(xp, lin, u)])
+            if not same:  # (V_j ×ₘ S̃_j) v_j polarised
+                accel = 0.5 * (accel + dq[..., None] * _concat(xp, [_cross(xp, wv, u), _cross(xp, wv, x)
+                                                                    + _cross(xp, linv, u)]))
+        if a is not None:
+            accel = a[..., None] * S if accel is None else accel + a[..., None] * S
+        vectors = []  # world vectors to express in link axes (velocities at the link origin: v + ω × p)
+        if w is not None:
+            vectors += [w, lin + _cross(xp, w, p0)] + ([] if same else [wv, linv + _cross(xp, wv, p0)])
+        if accel is not None:
+            accel = self._ancestors(xp, accel)
+            alpha, acc = accel[..., 0:3], accel[..., 3:6] + _cross(xp, accel[..., 0:3], p0)
+            vectors += [alpha, acc + self._const["minus_g"] if gravity else acc]
+        elif gravity:
+            vectors.append(0.0 * p0 + self._const["minus_g"])
+        if not vectors:
+            return _Motion(None, None, None, None, 0.0 * p0, True)
+        local = _mtv(kin.R0[..., None, :, :], xp.stack(vectors, axis=-2))  # Rᵀ y, (..., n, k, 3)
+        alpha = local[..., -2, :] if accel is not None else None
+        acc = local[..., -1, :]
+        if w is None:
+            return _Motion(None, None, None, alpha, acc, True)
+        w_l, lin_l = local[..., 0, :], local[..., 1, :]
+        if same:
+            return _Motion(w_l, w_l, lin_l, alpha, acc + _cross(xp, w_l, lin_l), True)
+        wv_l, linv_l = local[..., 2, :], local[..., 3, :]
+        return _Motion(w_l, wv_l, lin_l, alpha, acc + 0.5 * (_cross(xp, w_l, linv_l) + _cross(xp, wv_l, lin_l)), False)
+
+    def _ancestors(self, xp: Any, y: Array) -> Array:
+        """Σ_j y_j over the joints j that move link i (j = i or an ancestor), along axis −2: a cumulative sum for a
+        chain (measured faster under XLA than the product with the 0/1 matrix a tree needs)."""
+        return xp.cumsum(y, axis=-2) if self._chain else xp.matmul(self._const["up"], y)
+
+    def _subtree(self, xp: Any, y: Array) -> Array:
+        """Σ_i y_i over the links i that joint j moves (its subtree), along axis −2."""
+        if self._chain:
+            return xp.flip(xp.cumsum(xp.flip(y, axis=-2), axis=-2), axis=-2)
+        return xp.matmul(self._const["down"], y)
+
+    @staticmethod
+    def _link_regressor(xp: Any, m: _Motion) -> Array:
+        """A_i, link i's wrench [moment about its origin; force] = A_i φ_i, shape `(..., n, 6, 10)`, columns
+        m → [0; ā],  h_k → [e_k × ā; α × e_k + ω × (ω × e_k)],  I_c → [E_c α + ω × E_c ω; 0]  (ω-products polarised)."""
+        acc = m.acc
+        moment_h, force_h = -_skew(xp, acc), 0.0 * acc[..., None] + 0.0 * acc[..., None, :]
+        moment_i = 0.0 * acc[..., None, :] + xp.zeros((6, 3))
+        if m.alpha is not None:
+            force_h = force_h + _skew(xp, m.alpha)
+            moment_i = moment_i + _pair_columns(xp, m.alpha)
+        if m.w is not None:  # ½[ω × (ωv × e) + ωv × (ω × e)] = ½(ωv ωᵀ + ω ωvᵀ)e − (ω·ωv) e
+            w, wv = m.w, m.wv
+            dot = (w * wv).sum(axis=-1)[..., None, None]
+            force_h = force_h + 0.5 * (wv[..., :, None] * w[..., None, :] + w[..., :, None] * wv[..., None, :]) \
+                - dot * xp.eye(3)
+            moment_i = moment_i + (_cross(xp, w[..., None, :], _pair_columns(xp, wv)) if m.same else
+                                   0.5 * (_cross(xp, w[..., None, :], _pair_columns(xp, wv))
+                                          + _cross(xp, wv[..., None, :], _pair_columns(xp, w))))
+        zero = 0.0 * acc[..., None]
+        moment = xp.concat([zero, moment_h, xp.swapaxes(moment_i, -1, -2)], axis=-1)
+        force = xp.concat([acc[..., None], force_h, zero + xp.zeros(6)], axis=-1)
+        return xp.concat([moment, force], axis=-2)
+
+    def _project(self, xp: Any, kin: _Kin, A: Array) -> Array:
+        """Y[j, 10 i + c] = S̃_jᵀ (X_i* A_i)[:, c] for the joints j that move link i: link wrenches to world axes
+        (f̃ = R0 f, ñ = R0 n + p0 × f̃), then dotted with the joints' world motion; shape `(..., n, 10n)`."""
+        R0 = kin.R0
+        force = _mm(R0, A[..., 3:, :])
+        moment = _mm(R0, A[..., :3, :]) + _mm(_skew(xp, kin.p0), force)
+        S = xp.concat([kin.u, kin.x], axis=-1)
+        Y = xp.einsum("...jd,...idc->...jic", S, xp.concat([moment, force], axis=-2)) * self._const["down"][:, :, None]
+        return xp.reshape(Y, Y.shape[:-2] + (10 * self.n,))
+
+    def _wrench_torques(self, xp: Any, kin: _Kin, m: _Motion, phi: Array) -> Array:
+        """τ_j = S̃_jᵀ Σ_i X_i* (A_i φ_i) over the links j moves, with n = I α + ω × I ω + h × ā and
+        f = m ā + α × h + ω × (ω × h) (ω-products polarised)."""
+        links = xp.reshape(phi[..., : 10 * self.n], phi.shape[:-1] + (self.n, 10))
+        mass, h, inertia = links[..., 0:1], links[..., 1:4], _sym(xp, links[..., 4:10])
+        moment, force = _cross(xp, h, m.acc), mass * m.acc
+        if m.alpha is not None:
+            moment, force = moment + _mv(inertia, m.alpha), force + _cross(xp, m.alpha, h)
+        if m.w is not None:
+            pairs = [(m.w, m.wv)] if m.same else [(m.w, m.wv), (m.wv, m.w)]
+            scale = 1.0 / len(pairs)
+            for a, b in pairs:
+                moment = moment + scale * _cross(xp, a, _mv(inertia, b))
+                force = force + scale * _cross(xp, a, _cross(xp, b, h))
+        world = _mv(kin.R0[..., None, :, :], xp.stack([moment, force], axis=-2))
+        force = world[..., 1, :]
+        total = self._subtree(xp, _concat(xp, [world[..., 0, :] + _cross(xp, kin.p0, force), force]))
+        return (xp.concat([kin.u, kin.x], axis=-1) * total).sum(axis=-1)
+
+    def _world_inertias(self, xp: Any, kin: _Kin, phi: Array) -> tuple[Array, Array, Array]:
+        """Composite (subtree) mass `(..., n, 1)`, first moment `(..., n, 3)` and inertia `(..., n, 3, 3)` about the world
+        origin in world axes: h̃ = R h + m p, Ĩ = R I Rᵀ − p h̃ᵀ − h̃ pᵀ + 2(h̃·p) 1 − m(p pᵀ − |p|² 1) with h̃ = R h."""
+        links = xp.reshape(phi[..., : 10 * self.n], phi.shape[:-1] + (self.n, 10))
+        mass, h = links[..., 0], links[..., 1:4]
+        R0, p0 = kin.R0, kin.p0
+        Rh = _mv(R0, h)
+        RIRt = _mm(_mm(R0, _sym(xp, links[..., 4:10])), xp.swapaxes(R0, -1, -2))
+        pp, ph = (p0 * p0).sum(axis=-1), (p0 * Rh).sum(axis=-1)
+        outer = p0[..., :, None] * Rh[..., None, :]
+        inertia = RIRt - outer - xp.swapaxes(outer, -1, -2) - mass[..., None, None] * p0[..., :, None] * p0[..., None, :] \
+            + (2.0 * ph + mass * pp)[..., None, None] * xp.eye(3)
+        flat = xp.reshape(inertia, inertia.shape[:-2] + (9,))
+        composite = xp.reshape(self._subtree(xp, flat), flat.shape[:-2] + (self.n, 3, 3))
+        return self._subtree(xp, mass[..., None]), self._subtree(xp, Rh + mass[..., None] * p0), composite
+
+    def _extra(self, phi: Array, name: str) -> Array:
+        k = 10 * self.n + self.n * self.extras.index(name)
+        return phi[..., k : k + self.n]
+
+    def _with_extras(self, xp: Any, Y: Array, batch: tuple[int, ...], values: dict[str, Array]) -> Array:
+        """Y with the extra column groups: diag(values[group]) (sgn for Coulomb), zero for a group not in `values`."""
+        Y = xp.broadcast_to(Y, batch + (self.n, 10 * self.n))
+        if not self.extras:
+            return Y
+        eye = self._const["eye"]
+        blocks = [Y]
+        for e in self.extras:
+            x = values.get(e)
+            block = 0.0 * eye if x is None else (xp.sign(x) if e == "coulomb" else x)[..., :, None] * eye
+            blocks.append(xp.broadcast_to(block, batch + (self.n, self.n)))
+        return xp.concat(blocks, axis=-1)
+
+    # -- the model ------------------------------------------------------------------------------------------------------
+
+    def _inputs(self, *arrays: Array) -> tuple[Any, tuple[int, ...], list[Array]]:
+        xp = array_namespace(*arrays)
+        arrays = tuple(np.asarray(x, dtype=float) if xp is np else xp.asarray(x) for x in arrays)
+        return xp, tuple(np.broadcast_shapes(*(x.shape[:-1] for x in arrays))), list(arrays)
+
+    def regressor(self, q: Array, dq: Array, v: Array, a: Array) -> Array:
+        """Y(q, q̇, v, a), shape `(..., n, p)`: Y φ = M a + V_m(q, q̇) v + G + F(q̇) (P3), one bilinear pass."""
+        xp, batch, (q, dq, v, a) = self._inputs(q, dq, v, a)
+        kin = self._kinematics(xp, q)
+        Y = self._project(xp, kin, self._link_regressor(xp, self._pass(xp, kin, dq, v, a, True)))
+        return self._with_extras(xp, Y, batch, {"rotor_inertia": a, "viscous": dq, "coulomb": dq})
+
+    def momentum_regressor(self, q: Array, dq: Array) -> Array:
+        """Y_h(q, q̇) with Y_h φ = M(q) q̇ (6.6.3): the pass with zero velocity, acceleration q̇ and no gravity."""
+        xp, batch, (q, dq) = self._inputs(q, dq)
+        kin = self._kinematics(xp, q)
+        Y = self._project(xp, kin, self._link_regressor(xp, self._pass(xp, kin, None, None, dq, False)))
+        return self._with_extras(xp, Y, batch, {"rotor_inertia": dq})
+
+    def remainder_regressor(self, q: Array, dq: Array) -> Array:
+        """Y_g(q, q̇) with Y_g φ = −V_mᵀ q̇ + G + F (6.6.4), exact: row k of −V_mᵀ q̇ is −Σ_i V_iᵀ A_i(q̇, e_k), V_i link
+        i's velocity and A_i(q̇, e_k) its wrench regressor in the pass with v = e_k (no gravity)."""
+        xp, batch, (q, dq) = self._inputs(q, dq)
+        kin = self._kinematics(xp, q)
+        Y = self._project(xp, kin, self._link_regressor(xp, self._pass(xp, kin, None, None, None, True)))
+        m = self._pass(xp, kin.expand(), dq[..., None, :], self._const["eye"], None, False)  # axis -3: k
+        velocity = xp.concat([m.w, m.lin], axis=-1)[..., :1, :, :]  # slot 1 does not depend on k
+        coriolis = (velocity[..., None] * self._link_regressor(xp, m)).sum(axis=-2)  # (..., k, i, 10)
+        Y = Y - xp.reshape(coriolis, coriolis.shape[:-2] + (10 * self.n,))
+        return self._with_extras(xp, Y, batch, {"viscous": dq, "coulomb": dq})
+
+    def mass_matrix(self, q: Array, phi: Array) -> Array:
+        """M(q) (P1), shape `(..., n, n)`, by composite rigid bodies on φ: M_jk = S̃_jᵀ Ĩᶜ_k S̃_k for j moving k."""
+        xp, batch, (q, phi) = self._inputs(q, phi)
+        return xp.broadcast_to(self._mass(xp, self._kinematics(xp, q), phi), batch + (self.n, self.n))
+
+    def _mass(self, xp: Any, kin: _Kin, phi: Array) -> Array:
+        mass, h, inertia = self._world_inertias(xp, kin, phi)
+        u, x = kin.u, kin.x
+        ang = _mv(inertia, u) + _cross(xp, h, x)  # Ĩᶜ_k S̃_k = [I u + h × x; m x + u × h]
+        lin = mass * x + _cross(xp, u, h)
+        U = xp.einsum("...jd,...kd->...jk", u, ang) + xp.einsum("...jd,...kd->...jk", x, lin)
+        down = self._const["down"]
+        M = U * down + xp.swapaxes(U * down, -1, -2) - U * self._const["eye"]
+        if self.rotor_inertia is not None:
+            M = M + self._extra(phi, "rotor_inertia")[..., :, None] * self._const["eye"]
+        return M
+
+    def coriolis_matrix(self, q: Array, dq: Array, phi: Array) -> Array:
+        """V_m(q, q̇) (P2, Christoffel form), column k = B(q̇, e_k): the bilinear pass with v = e_k, no gravity."""
+        xp, batch, (q, dq, phi) = self._inputs(q, dq, phi)
+        kin = self._kinematics(xp, q).expand()
+        m = self._pass(xp, kin, dq[..., None, :], self._const["eye"], None, False)
+        return xp.broadcast_to(xp.swapaxes(self._wrench_torques(xp, kin, m, phi[..., None, :]), -1, -2),
+                               batch + (self.n, self.n))
+
+    def gravity(self, q: Array, phi: Array) -> Array:
+        """G(q), shape `(..., n)`: τ_j = S̃_jᵀ [h̃ᶜ_j × (−g); −mᶜ_j g] from the subtrees' mass and first moment."""
+        xp, batch, (q, phi) = self._inputs(q, phi)
+        kin = self._kinematics(xp, q)
+        mass, h, _ = self._world_inertias(xp, kin, phi)
+        minus_g = self._const["minus_g"]
+        G = (kin.u * _cross(xp, h, minus_g + 0.0 * h)).sum(axis=-1) + (kin.x * minus_g).sum(axis=-1) * mass[..., 0]
+        return xp.broadcast_to(G, batch + (self.n,))
+
+    def friction(self, dq: Array, phi: Array) -> Array:
+        """F(q̇) = f_v ∘ q̇ + f_c ∘ sgn(q̇) (the groups present), shape `(..., n)`."""
+        xp, batch, (dq, phi) = self._inputs(dq, phi)
+        out = 0.0 * dq + 0.0 * phi[..., :1]
+        if self.viscous is not None:
+            out = out + self._extra(phi, "viscous") * dq
+        if self.coulomb is not None:
+            out = out + self._extra(phi, "coulomb") * xp.sign(dq)
+        return out
+
+    def inverse_dynamics(self, q: Array, dq: Array, ddq: Array, phi: Array) -> Array:
+        """τ = M q̈ + V_m q̇ + G + F (6.2.1): the standard pass on φ, O(n²) with the subtree sums."""
+        xp, batch, (q, dq, ddq, phi) = self._inputs(q, dq, ddq, phi)
+        kin = self._kinematics(xp, q)
+        tau = self._wrench_torques(xp, kin, self._pass(xp, kin, dq, None, ddq, True), phi) + self.friction(dq, phi)
+        if self.rotor_inertia is not None:
+            tau = tau + self._extra(phi, "rotor_inertia") * ddq
+        return xp.broadcast_to(tau, batch + (self.n,))
+
+    def forward_dynamics(self, q: Array, dq: Array, tau: Array, phi: Array) -> Array:
+        """q̈ = M⁻¹ (τ − V_m q̇ − G − F): M by composite rigid bodies, the bias by one pass, an unrolled LDLᵀ solve
+        (no pivoting: M symmetric with nonzero leading minors, as a plant's M is; elementwise, so it fuses under XLA
+        and vectorises over batches, measured 5–10 % faster per closed-loop step than `linalg.solve`)."""
+        xp, batch, (q, dq, tau, phi) = self._inputs(q, dq, tau, phi)
+        kin = self._kinematics(xp, q)
+        bias = self._wrench_torques(xp, kin, self._pass(xp, kin, dq, None, None, True), phi) + self.friction(dq, phi)
+        return _ldl_solve(xp, self._mass(xp, kin, phi), tau - bias)
