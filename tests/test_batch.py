@@ -180,7 +180,7 @@ def test_when_every_run_stops_the_batch_ends_there():
 def _peak_bytes(N: int, steps: int, log_every: int) -> tuple[int, object]:
     tracemalloc.start()
     res = simulate_batch(Plant(ARM, PHI), slotine_li(), sinusoid(2), t_final=steps * 1e-3, q0=np.zeros((N, 2)),
-                         log_every=log_every)
+                         integrator=RK4(1e-3, "numpy"), log_every=log_every)  # the compiled path: REF_BYTES bounds it
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
     return peak, res
@@ -228,3 +228,19 @@ def test_run_indexes_like_a_sequence():
     with pytest.raises(IndexError):
         batch.run(2)
     assert [metrics(batch.run(i))["status"] for i in range(len(batch))] == ["ok", "ok"]
+
+
+def test_a_repetitive_batch_with_a_run_that_stops_keeps_its_delay_lines_apart():
+    """Table 7.2.2 with one delay line per run (carried, written by the pure ring update): run 1 starts 2 rad off and
+    exceeds max_state early; the others run past the first period (the ring wraps), each equal to its single run, and
+    the stopped run's log holds the state it stopped in."""
+    s = load("example-7.2.2", ["trajectory.omega=10.0", "controller.period=0.6283185307179586",
+                               "simulation.dt=0.0015707963267948966"]).setup
+    q0 = np.array([[0.0, 0.0], [-2.0, 0.0], [0.2, 0.1]])
+    kw = dict(t_final=0.7, log_every=2, max_state=580.0, integrator=s.integrator)
+    batch = simulate_batch(s.plant, s.controller, s.trajectory, q0=q0, **kw)
+    assert [st == "ok" for st in batch.status] == [True, False, True]
+    for i in range(3):
+        assert_same_run(batch.run(i), simulate(s.plant, s.controller, s.trajectory, q0=q0[i], **kw))
+    frozen = batch.z[batch.n_logged[1] :, 1]
+    assert np.all(frozen == frozen[0])

@@ -215,3 +215,54 @@ def test_bad_input_through_the_real_process(tmp_path, args, field):
     assert proc.returncode == 2
     assert proc.stdout == ""
     assert field in one_error_line(proc.stderr)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the first hour: version, a result at the prompt, the book's name of a law
+
+
+def test_version_option_prints_the_installed_version():
+    """`robotadapt --version` reads the installed metadata (pyproject.toml's version, no copy of the number)."""
+    import importlib.metadata
+
+    proc = cli("--version")
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == f"robotadapt {importlib.metadata.version('robotadapt')}"
+
+
+def test_package_version_is_the_installed_metadata():
+    import importlib.metadata
+
+    import robotadapt
+
+    assert robotadapt.__version__ == importlib.metadata.version("robotadapt")
+
+
+def test_a_result_reads_in_a_few_lines_at_the_prompt():
+    from robotadapt.studies.scenarios import load
+
+    res = load("example-6.3.1", ["simulation.t_final=0.1"]).run()
+    text = repr(res)
+    assert len(text.splitlines()) < 10 and len(text) < 400, text
+    for part in ("status='ok'", "101 samples", "0.1 s", "2 joints", "m1, m2", "final |e|"):
+        assert part in text, (part, text)
+    assert str(res) == text
+
+
+def test_the_books_name_inertia_related_builds_the_slotine_li_law():
+    """Table 6.3.1 calls Slotine–Li's law the inertia-related controller: both kind names build the one class, with
+    the same gains; an unknown kind lists both names."""
+    from robotadapt.controllers import InertiaRelated
+    from robotadapt.studies.compare import lineup
+    from robotadapt.studies.scenarios import load
+    from robotadapt.validation import ConfigError
+
+    ours = load("example-6.3.1").setup.controller
+    book = load("example-6.3.1", ["controller.kind='inertia_related'"]).setup.controller
+    assert type(ours) is type(book) is InertiaRelated
+    for name in ("Lam", "Kv", "Gamma", "phi_hat0"):
+        np.testing.assert_array_equal(getattr(ours, name), getattr(book, name))
+    entries, _ = lineup(load("example-6.3.1", ["controller.kind='inertia_related'"]))
+    assert "scenario" not in [e.name for e in entries]  # it is the lineup's slotine_li, not another law
+    with pytest.raises(ConfigError, match="inertia_related.*slotine_li"):
+        load("example-6.3.1", ["controller.kind='magic'"])

@@ -400,3 +400,62 @@ def test_both_lyapunov_pairs_converge_over_20_s(name, overrides):
     assert np.all(np.abs(res.e[-1]) < 1e-6)
     np.testing.assert_allclose(res.phi_hat[-1], [0.8, 2.3], atol=1e-4)
     assert lyapunov_increase(res.V) < 1e-9
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# The guard as an indicator (issue 14): what a compiled loop reads, since traced code cannot raise
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5])
+def test_positive_definite_is_the_cholesky_test_matrix_by_matrix(n):
+    """The closed forms (n ≤ 2) and the stacked Cholesky agree with numpy's Cholesky, one matrix at a time, on
+    definite, semidefinite, indefinite and non-finite matrices (not definite); JAX gives the same answers."""
+    from robotadapt.controllers.base import positive_definite
+
+    rng = np.random.default_rng(n)
+    A = rng.normal(size=(40, n, n))
+    S = A @ A.mT + rng.uniform(-1.0, 1.0, size=(40, 1, 1)) * np.eye(n)  # some shifted out of definiteness
+    S[0] = 0.0
+    S[1] = np.eye(n)
+    S[2, 0, 0] = np.nan
+
+    def cholesky_ok(a):  # a finite factor: numpy's Cholesky passes NaNs through
+        try:
+            return bool(np.all(np.isfinite(np.linalg.cholesky(a))))
+        except np.linalg.LinAlgError:
+            return False
+
+    want = np.array([cholesky_ok(a) for a in S])
+    assert 0 < want.sum() < len(want)
+    np.testing.assert_array_equal(positive_definite(np, S), want)
+    np.testing.assert_array_equal(positive_definite(np, S[1]), True)
+    jnp = pytest.importorskip("jax").numpy
+    from robotadapt.sim.compiled import jax_module
+
+    jax_module()  # float64
+    np.testing.assert_array_equal(np.asarray(positive_definite(jnp, jnp.asarray(S))), want)
+
+
+def test_on_traced_arrays_the_update_returns_nan_where_the_guard_fails():
+    """The same law on JAX arrays: no exception (tracing cannot raise), NaN for the run whose M̂ is indefinite, the
+    numpy values for the others, and `guard` says which; on numpy arrays the same call raises SimulationStop."""
+    pytest.importorskip("jax")
+    from robotadapt.sim.compiled import jax_module
+
+    jnp = jax_module().numpy
+    ctrl = book_controller()
+    x = np.array([[0.85, 2.2], [-0.3, 1.0], [0.8, 2.3]])
+    q, dq, ddq = np.zeros((3, 2)), np.zeros((3, 2)), np.ones((3, 2))
+    ref = Reference(np.zeros((3, 2)), np.ones((3, 2)), np.zeros((3, 2)))
+    np.testing.assert_array_equal(ctrl.guard(0.0, x, q, dq, ref), [True, False, True])
+    with pytest.raises(SimulationStop, match=re.escape("φ̂ = [-0.3  1. ]")):
+        ctrl.update(0.0, x, q, dq, ddq, ref)
+    traced = jax_module().jit(lambda *a: (ctrl.update(0.0, *a[:4], Reference(*a[4:])), ctrl.guard(0.0, *a[:3],
+                                                                                                     Reference(*a[4:]))))
+    dx, ok = (np.asarray(a) for a in traced(*(jnp.asarray(a) for a in (x, q, dq, ddq, *ref))))
+    np.testing.assert_array_equal(ok, [True, False, True])
+    assert np.all(np.isnan(dx[1]))
+    keep = [0, 2]
+    want = ctrl.update(0.0, x[keep], q[keep], dq[keep], ddq[keep], Reference(*(a[keep] for a in ref)))
+    np.testing.assert_allclose(dx[keep], want, rtol=1e-12)
+    assert ctrl.stop_reason(q[1], x[1]).startswith("the estimated mass matrix M̂(q) is no longer positive definite")

@@ -439,3 +439,44 @@ def test_bad_pinocchio_models_and_tables():
     raises(lambda: dataclasses.replace(good, joints="RX"), "robot.joints", "'R'")
     raises(lambda: dataclasses.replace(good, link_params=np.zeros((2, 9))), "robot.link_params", "shape")
     raises(lambda: dataclasses.replace(good, viscous=[-1.0, 0.0]), "robot.viscous", "positive")
+
+
+@pytest.mark.parametrize("name, reference", [("panda-slotine-li", "pinocchio"), ("panda-composite", "pinocchio"),
+                                             ("ur5-dcal", "pinocchio"), ("puma560-slotine-li", "sympy")])
+def test_packaged_n_dof_scenarios_compile_and_equal_the_reference_model(name, reference):
+    """The scenarios build the kinematic tree by default and run compiled; the run equals the one on the model it is
+    checked against (Pinocchio's C++ or the sympy expressions) stepped by numpy, to 1e-9 relative."""
+    from robotadapt.sim.integrators import choose_backend
+    from robotadapt.studies.scenarios import load
+
+    tree = load(name, ["simulation.t_final=0.1", "simulation.backend='jax'"])
+    assert isinstance(tree.setup.controller.model, KinematicTree) and tree.setup.controller.model.traceable
+    ref = load(name, ["simulation.t_final=0.1", f"robot.model='{reference}'", "simulation.backend='numpy'"])
+    assert not isinstance(ref.setup.controller.model, KinematicTree)
+    assert choose_backend("auto", 10_000, tree.setup.controller.model.traceable) == "jax"
+    a, b = ref.run(), tree.run()
+    assert a.status == b.status == "ok"
+    for field in ("q", "dq", "x", "tau"):
+        scale = max(1.0, float(np.abs(getattr(a, field)).max()))
+        np.testing.assert_allclose(getattr(b, field), getattr(a, field), rtol=0, atol=1e-9 * scale, err_msg=field)
+
+
+FLOATING = """<robot name="f"><link name="base"/><link name="l1"><inertial><mass value="1"/>
+<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+<joint name="j1" type="floating"><parent link="base"/><child link="l1"/></joint></robot>"""
+
+
+@pytest.mark.parametrize("override, field", [
+    ("robot={kind='urdf', path='MISSING'}", "robot.path"),
+    ("robot={kind='urdf', path='FLOATING'}", "robot.path"),
+    ("robot.locked_joints=['nonesuch']", "robot.locked_joints"),
+])
+def test_bad_urdf_scenarios_are_one_line_and_exit_2(tmp_path, capsys, override, field):
+    from robotadapt.cli import main
+
+    (tmp_path / "floating.urdf").write_text(FLOATING)
+    override = override.replace("MISSING", str(tmp_path / "nonesuch.urdf"))
+    override = override.replace("FLOATING", str(tmp_path / "floating.urdf"))
+    assert main(["run", "panda-slotine-li", "--set", override, "--no-plots", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"robotadapt: error: {field}:"), err

@@ -6,7 +6,7 @@ import pytest
 from robotadapt.controllers.repetitive import Repetitive
 from robotadapt.robots import TwoLinkArm
 from robotadapt.studies.scenarios import load
-from robotadapt.trajectories import exponential_step, sinusoid
+from robotadapt.trajectories import Reference, exponential_step, sinusoid
 from robotadapt.validation import ConfigError
 
 T = 2 * np.pi
@@ -176,3 +176,51 @@ def test_bad_settings_name_the_field(over):
     kwargs = dict(Kv=50, Kp=50, Ka=50, kL=50) | over
     with pytest.raises(ConfigError, match="controller"):
         Repetitive(ARM, **kwargs)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# The delay line in the carried state (issue 14): a pure update, the same on numpy and JAX
+
+
+def test_the_delay_line_is_read_at_slot_k_mod_N_and_written_without_touching_the_old_line():
+    """`sample` at step k hands the law slot k mod N (the line's head, a copy), stores û_d(t_k) there in a new array,
+    reads slot k + 1 mod N for the next step from that new array, and leaves the line it was given as it was: the one
+    step function's update, numpy or traced."""
+    from robotadapt.plant import Plant
+    from robotadapt.sim.loop import ClosedLoop, Ring, ring_write, sample
+
+    ctrl = Repetitive(ARM, Kv=50, Kp=50, Ka=50, kL=20, period=T)
+    loop = ClosedLoop(Plant(ARM, np.array([0.8, 2.3])), ctrl, 2)
+    slots = np.arange(10.0).reshape(5, 2)
+    before = slots.copy()
+    line = Ring(slots, slots[2].copy())  # as the step before step 7 left it: 7 mod 5 = 2
+    ref = sinusoid(2)(0.3)
+    z = np.array([0.1, -0.2, 0.3, 0.05, 9.0, 9.0])
+    applied, new = sample(loop, 7, 0.3, z, line, ref)
+    np.testing.assert_array_equal(slots, before)
+    np.testing.assert_array_equal(applied[:4], z[:4])
+    np.testing.assert_array_equal(applied[4:], before[2])  # x = û_d(t − T), held over the step
+    held, store = ctrl.sample(0.3, z[4:], z[:2], z[2:4], ref, before[2])
+    np.testing.assert_array_equal(new.slots[2], store)
+    np.testing.assert_array_equal(np.delete(new.slots, 2, axis=0), np.delete(before, 2, axis=0))
+    np.testing.assert_array_equal(new.head, before[3])
+    np.testing.assert_array_equal(Ring.start(before).head, before[0])
+    jnp = pytest.importorskip("jax").numpy
+    from robotadapt.sim.compiled import jax_module
+
+    jax = jax_module()
+    applied_j, new_j = jax.jit(lambda k, z, line: sample(loop, k, 0.3, z, line, Reference(*ref)))(
+        jnp.asarray(7), jnp.asarray(z), Ring(jnp.asarray(slots), jnp.asarray(slots[2])))
+    np.testing.assert_allclose(np.asarray(applied_j), applied, rtol=1e-15)
+    np.testing.assert_allclose(np.asarray(new_j.slots), new.slots, rtol=1e-15)
+    np.testing.assert_array_equal(np.asarray(new_j.head), new.head)
+    np.testing.assert_array_equal(ring_write(slots, 0, np.zeros(2))[0], 0.0)
+    np.testing.assert_array_equal(slots, before)
+
+
+def test_the_saturated_law_clips_on_jax_arrays_too():
+    jnp = pytest.importorskip("jax").numpy
+    ctrl = Repetitive(ARM, Kv=50, Kp=50, Ka=50, kL=20, period=T, u_min=-5, u_max=5)
+    ref = sinusoid(2)(0.3)
+    held, _ = ctrl.sample(0.3, jnp.zeros(2), jnp.zeros(2), jnp.zeros(2), Reference(*ref), jnp.asarray([7.0, -1.0]))
+    np.testing.assert_array_equal(np.asarray(held), [5.0, -1.0])

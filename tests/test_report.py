@@ -97,7 +97,8 @@ def test_comparison_has_one_row_per_controller_and_embedded_figures(comparison):
     assert [r["controller"] for r in data["rows"]] == list(LINEUP)
     for row in data["rows"]:
         assert row["status"] == "ok"
-        assert row["us_per_step"] > 0 and row["peak_torque"] > 0 and row["rms_error"] > 0
+        assert row["us_per_step"] > 0 and row["peak_torque"] > 0 and row["rms_error_norm"] > 0
+        assert "rms_error" not in row  # the per-joint metric of metrics.json: the table has the one scalar
     by_name = {r["controller"]: r for r in data["rows"]}
     assert by_name["repetitive"]["final_phi_error"] is None  # learns a signal, not φ
     assert "T/6284" in by_name["repetitive"]["note"]  # dt = 1e-3 does not divide 2π: the nearest step that does

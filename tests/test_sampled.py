@@ -24,9 +24,12 @@ from scipy.linalg import expm
 from robotadapt.cli import main
 from robotadapt.controllers import PD, InertiaRelated
 from robotadapt.plant import Plant
+from robotadapt.plant.actuators import Actuator, DCMotor
+from robotadapt.plant.sensors import Sensor
+from robotadapt.plant.unmodeled import ElasticJoint
 from robotadapt.robots import OneLinkArm, TwoLinkArm
 from robotadapt.sim import RK4, Sampled, simulate
-from robotadapt.studies.scenarios import load
+from robotadapt.studies.scenarios import available, load
 from robotadapt.trajectories import constant, sinusoid
 from robotadapt.validation import ConfigError
 
@@ -292,3 +295,193 @@ def test_digital_6_3_1_study_fails_between_10_and_15_ms():
             assert run.result.ok and np.abs(run.result.e[-1]).max() < 1e-3, run.value
         else:
             assert run.result.status.startswith("diverged at t="), run.value
+
+
+# -- the compiled loop (robotadapt.sim.compiled_sampled): the same tick under jax.jit and lax.scan equals numpy ---------
+
+def _forced(original: Any, backend: str) -> Any:
+    """`sampled.integrate` with its backend fixed, whatever `simulate` asks for."""
+    def integrate(*args: Any, **kw: Any) -> Any:
+        kw.pop("backend", None)
+        return original(*args[:9], backend=backend, **kw)
+
+    return integrate
+
+
+def both(monkeypatch: pytest.MonkeyPatch, run: Any) -> tuple[Any, Any]:
+    """`run()` (a call of simulate with a Sampled integrator) stepped by numpy, then compiled by JAX; the compiled
+    driver must have been taken exactly once."""
+    pytest.importorskip("jax", reason="the compiled loop needs JAX")
+    from robotadapt.sim import compiled_sampled, sampled
+
+    calls: list[int] = []
+    compiled = compiled_sampled.integrate
+
+    def counting(*args: Any, **kw: Any) -> Any:
+        calls.append(1)
+        return compiled(*args, **kw)
+
+    original = sampled.integrate
+    monkeypatch.setattr(compiled_sampled, "integrate", counting)
+    monkeypatch.setattr(sampled, "integrate", _forced(original, "numpy"))
+    a = run()
+    monkeypatch.setattr(sampled, "integrate", _forced(original, "jax"))
+    b = run()
+    monkeypatch.setattr(sampled, "integrate", original)
+    assert calls == [1]
+    return a, b
+
+
+def assert_same_run(a: Any, b: Any, rtol: float = 1e-9) -> None:
+    """Same status, same logged instants, every logged array equal to `rtol` of its largest entry (at least 1)."""
+    assert b.status == a.status
+    np.testing.assert_array_equal(b.t, a.t)
+    A, B = a.arrays(), b.arrays()
+    assert A.keys() == B.keys()
+    for name, value in A.items():
+        if np.issubdtype(value.dtype, np.floating):
+            scale = max(1.0, float(np.max(np.abs(value), initial=0.0, where=np.isfinite(value))))
+            np.testing.assert_allclose(B[name], value, rtol=0, atol=rtol * scale, err_msg=name)
+        else:
+            np.testing.assert_array_equal(B[name], value, err_msg=name)
+
+
+def _sampled_scenarios() -> list[str]:
+    return [name for name in available() if "control_period" in load(name).data["simulation"]]
+
+
+def test_the_packaged_sampled_scenarios_are_found():
+    assert {"digital-6.3.1", "noise-6.3.1"} <= set(_sampled_scenarios())
+
+
+@pytest.mark.parametrize("name", _sampled_scenarios())
+def test_every_packaged_sampled_scenario_compiles_to_the_numpy_run(monkeypatch, name):
+    a, b = both(monkeypatch, lambda: load(name, ["simulation.t_final=0.5"]).run())
+    assert a.ok
+    assert_same_run(a, b)
+
+
+def _effects(t_final: float = 0.5, integrator: Any = None, **parts: Any) -> Any:
+    arm = TwoLinkArm()
+    ctrl = InertiaRelated(arm, Lam=2.5, Kv=10, Gamma=20, phi_hat0=[0, 0])
+    return lambda: simulate(Plant(arm, [0.8, 2.3], **parts), ctrl, sinusoid(2), t_final=t_final,
+                            integrator=integrator or Sampled(1e-3))
+
+
+MOTOR = dict(R=1.2, L=2e-3, k_t=0.08, k_b=0.08, gear_ratio=60.0, current_gain=25.0)
+EFFECTS = [
+    pytest.param(_effects(actuator=Actuator(2, torque_limit=100.0, torque_rate_limit=2000.0, delay_samples=2)),
+                 id="limit-rate-delay"),
+    pytest.param(_effects(sensor=Sensor(2, encoder_resolution=1e-4, velocity="filter", velocity_cutoff=50.0,
+                                        noise_q=1e-4, noise_dq=1e-3, seed=7)), id="encoder-filter-noise"),
+    pytest.param(_effects(sensor=Sensor(2, encoder_resolution=1e-3, velocity="difference", noise_dq=1e-3, seed=2),
+                          actuator=Actuator(2, delay_samples=1)), id="encoder-difference-noise-delay"),
+    pytest.param(_effects(0.3, Sampled(1e-3, 1e-4), motor=DCMotor(2, **MOTOR, voltage_limit=500.0)), id="dc-motor"),
+    pytest.param(_effects(0.3, Sampled(1e-3, 1e-4), motor=DCMotor(2, **MOTOR, rotor_inertia=[2e-4, 1e-4])),
+                 id="dc-motor-rotor"),
+    pytest.param(_effects(0.3, Sampled(1e-3, 2.5e-4), elastic_joint=ElasticJoint(2, J=0.1, K=1e4, D=5.0)),
+                 id="elastic-joint"),
+]
+
+
+@pytest.mark.parametrize("run", EFFECTS)
+def test_plant_effects_compile_to_the_numpy_run(monkeypatch, run):
+    a, b = both(monkeypatch, run)
+    assert a.ok
+    assert_same_run(a, b)
+
+
+REPETITIVE = ["trajectory.omega=10.0", "controller.period=0.6283185307179586", "simulation.t_final=1.4",
+              "simulation.control_period=0.0015707963267948966"]  # N = 400 ticks a period, 2.2 periods: the ring wraps
+
+
+def test_the_repetitive_laws_delay_line_is_carried_through_the_scan(monkeypatch):
+    a, b = both(monkeypatch, lambda: load("example-7.2.2", [*REPETITIVE, "simulation.log_every=3"]).run())
+    assert a.ok and a.t[-1] > 2 * 0.6283
+    assert_same_run(a, b)
+
+
+def test_the_saturated_repetitive_law_compiles(monkeypatch):
+    a, b = both(monkeypatch, lambda: load("problem-7.2-4", REPETITIVE).run())
+    assert a.ok
+    assert_same_run(a, b)
+
+
+@pytest.mark.parametrize("rule", ["euler", "hold"])
+def test_acceleration_by_differences_and_a_projection_compile(monkeypatch, rule):
+    """Example 6.2.2's adaptive computed torque (q̈ from the backward difference of the measured velocities, φ̂
+    projected into a box) on a tachometer with noise (exact velocity: a difference of differenced positions would
+    amplify round-off by 1/Ts², beyond 1e-9 in a few hundred ticks)."""
+    sets = ["controller.phi_min=0.1", "controller.phi_max=10", "plant.noise_dq=1e-3", "plant.seed=4",
+            "simulation.t_final=0.3", "simulation.control_period=1e-3", "simulation.dt=5e-4",
+            f"simulation.discretization='{rule}'", "simulation.log_every=2"]
+    a, b = both(monkeypatch, lambda: load("example-6.2.2", sets).run())
+    assert a.ok and a.phi_hat.min() >= 0.1
+    assert_same_run(a, b)
+
+
+@pytest.mark.parametrize(("rule", "t_stop"), [("euler", "0.01"), ("hold", "0")])
+def test_a_guarded_law_stops_at_the_same_tick_with_its_own_reason_compiled(monkeypatch, rule, t_stop):
+    """Example 6.2.2 without a box, sampled at 10 ms: M̂(q) loses definiteness. Under "euler" the guard fails at the
+    sample of tick 1 (t = 0.01 s, that tick unlogged); under "hold" in a sub-step of tick 0 (t = 0, that tick logged).
+    numpy raises SimulationStop; the compiled loop reads the law's guard: the same status, with the law's φ̂."""
+    sets = ["simulation.t_final=1", "simulation.control_period=1e-2", "simulation.dt=2e-3",
+            f"simulation.discretization='{rule}'"]
+    a, b = both(monkeypatch, lambda: load("example-6.2.2", sets).run())
+    assert a.status.startswith(f"diverged at t={t_stop} s: the estimated mass matrix") and a.t.size == 1
+    assert_same_run(a, b)
+
+
+def test_the_hold_rule_with_a_loop_of_sub_steps_compiles(monkeypatch):
+    """"hold" with 10 sub-steps (a fori_loop inside the compiled tick, for the plant and for x), and the PID servo's
+    filter states of problem-6.4-1 on its 2 sub-steps."""
+    model = OneLinkArm()
+    a, b = both(monkeypatch, lambda: simulate(Plant(model, [M, B]), FilteredPD(model), sinusoid(1, 0.5, 2.0),
+                                              t_final=1.0, integrator=Sampled(0.02, 0.002, "hold"), q0=[0.3]))
+    assert_same_run(a, b)
+    sets = ["simulation.t_final=0.5", "simulation.control_period=2e-3", "simulation.discretization='hold'"]
+    assert_same_run(*both(monkeypatch, lambda: load("problem-6.4-1", sets).run()))
+
+
+@pytest.mark.parametrize("log_every", [1, 7])
+def test_a_diverging_run_stops_at_the_same_tick_compiled(monkeypatch, log_every):
+    """A non-finite state (example 6.3.1 at 20 ms) and a state beyond max_state (the one-link PD above its stability
+    limit): the same status text, the same partial log."""
+    sets = ["simulation.t_final=3", "simulation.control_period=0.02", f"simulation.log_every={log_every}"]
+    a, b = both(monkeypatch, lambda: load("example-6.3.1", sets).run())
+    assert a.status == "diverged at t=1.12 s: non-finite state" and a.t.size == 55 // log_every + 1
+    assert_same_run(a, b)
+    a, b = both(monkeypatch, lambda: one_link(0.25, 50.0, max_state=1e3, log_every=log_every))
+    assert "exceeded 1000" in a.status
+    assert_same_run(a, b)
+
+
+def test_sampled_loops_of_one_shape_share_a_program_and_keep_their_own_gains(monkeypatch):
+    from robotadapt.sim import compiled_sampled
+
+    arm = TwoLinkArm()
+    finals, programs = [], []
+    for kv in (5.0, 20.0):
+        ctrl = InertiaRelated(arm, 2.5, kv, 20.0, [0.0, 0.0])
+        a, b = both(monkeypatch, lambda ctrl=ctrl: simulate(Plant(arm, [0.8, 2.3]), ctrl, sinusoid(2), t_final=0.3,
+                                                            integrator=Sampled(1e-3)))
+        assert_same_run(a, b)
+        finals.append(b.x[-1])
+        programs.append(len(compiled_sampled._PROGRAMS))
+    assert not np.allclose(finals[0], finals[1]) and programs[1] == programs[0]
+
+
+def test_the_delay_line_is_written_into_a_new_array():
+    from robotadapt.sim.sampled import ring_write
+
+    line = np.arange(8.0).reshape(4, 2)
+    before = line.copy()
+    new = ring_write(line, 2, np.array([-1.0, -2.0]))
+    np.testing.assert_array_equal(line, before)
+    np.testing.assert_array_equal(new, [[0, 1], [2, 3], [-1, -2], [6, 7]])
+    jax = pytest.importorskip("jax")
+    from robotadapt.sim.compiled import jax_module
+
+    jnp = jax_module().numpy
+    traced = jax.jit(ring_write)(jnp.asarray(line), 2, jnp.asarray([-1.0, -2.0]))
+    np.testing.assert_array_equal(np.asarray(traced), new)

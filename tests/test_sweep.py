@@ -202,7 +202,7 @@ def test_cli_sweep_writes_table_manifest_and_figure(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert code == 0
     assert "sweep example-6.3.1: 6 runs (6 now, 0 already in the table)" in printed
-    assert "6 ok, 0 not finished; rms_error: best" in printed
+    assert "6 ok, 0 not finished; rms_error_norm: best" in printed
     assert {p.name for p in out.iterdir()} == {"runs.jsonl", "sweep.json", "sweep.png"}
     manifest = json.loads((out / "sweep.json").read_text())
     assert manifest["grid"] == {"controller.phi_hat0": [[0, 0], [0.5, 2]]} and manifest["runs"] == 6

@@ -227,12 +227,12 @@ def test_continuous_runs_with_extra_plant_states_keep_their_layout():
 
 
 def test_a_urdf_truth_with_the_friction_its_controller_model_lacks():
-    """An n-DOF truth from Pinocchio: the Panda with its URDF's joint damping (0.003 N m s/rad) under a Slotine–Li
+    """An n-DOF truth from a URDF: the Panda with its URDF's joint damping (0.003 N m s/rad) under a Slotine–Li
     controller whose model has no friction columns; the truth is outside the controller's parameterization."""
     pytest.importorskip("pinocchio")
     res = load("panda-slotine-li", ["plant.robot={kind='example_robot', name='panda', viscous=true}",
                                     "simulation.t_final=0.05"]).run()
     assert res.ok and res.phi is None
     model = res.info["plant"]["model"]
-    assert model["class"] == "PinocchioArm" and model["param_names"][-7:] == [f"fv{i}" for i in range(1, 8)]
+    assert model["class"] == "KinematicTree" and model["param_names"][-7:] == [f"fv{i}" for i in range(1, 8)]
     np.testing.assert_array_equal(model["phi"][-7:], 0.003)

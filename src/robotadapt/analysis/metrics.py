@@ -24,8 +24,10 @@ def lyapunov_increase(V: np.ndarray) -> float:
 def metrics(res: SimulationResult) -> dict[str, Any]:
     """Per-joint tracking metrics, torque and energy, final estimate, parameter error and Lyapunov monitor.
 
-    `final_abs_error` is |e| at the last logged instant; `rms_error` the RMS of e over the run; `max_abs_torque`
-    max |τ|; `control_energy` ∫ τᵀτ dt; `final_phi_error` ‖φ − φ̂‖ at the end when the truth is known;
+    `final_abs_error` is |e| at the last logged instant, per joint; `rms_error` the RMS of e over the logged samples,
+    **per joint**: √(mean_k e_i(t_k)²), one entry per joint (rad or m); `rms_error_norm` the one scalar
+    √(mean_k ‖e(t_k)‖²) = √(Σ_i rms_error_i²), what `robotadapt compare` tabulates as "RMS ‖e‖"; `max_abs_torque`
+    max |τ| per joint; `control_energy` ∫ τᵀτ dt; `final_phi_error` ‖φ − φ̂‖ at the end when the truth is known;
     `lyapunov_max_rel_increase` the largest step increase of V relative to V(0).
     """
     e, t, tau = res.e, res.t, res.tau
@@ -37,6 +39,7 @@ def metrics(res: SimulationResult) -> dict[str, Any]:
         "final_abs_velocity_error": _list(np.abs(res.de[-1])),
         "max_abs_error": _list(np.max(np.abs(e), axis=0)),
         "rms_error": _list(np.sqrt(np.mean(e**2, axis=0))),
+        "rms_error_norm": float(np.sqrt(np.mean(np.sum(e**2, axis=-1)))),
         "max_abs_torque": _list(np.max(np.abs(tau), axis=0)),
         "control_energy": float(np.trapezoid(np.sum(tau**2, axis=-1), t)) if t.size > 1 else 0.0,
         "param_names": list(res.param_names),

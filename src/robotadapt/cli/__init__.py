@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.metadata
 import sys
 from types import ModuleType
 
@@ -15,6 +16,11 @@ from ..validation import ConfigError
 
 EXIT_BAD_INPUT = 2
 COMMANDS = ("list", "run", "gains", "pe", "figures", "compare", "sweep")
+
+
+def version() -> str:
+    """The installed package's version (its metadata, from pyproject.toml: no copy of the number here)."""
+    return importlib.metadata.version("robotadapt")
 
 
 def _modules() -> dict[str, ModuleType]:
@@ -30,6 +36,8 @@ def _modules() -> dict[str, ModuleType]:
 
 def _parser(modules: dict[str, ModuleType]) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="robotadapt", description="Adaptive control of rigid robot manipulators.")
+    p.add_argument("--version", action="version", version=f"%(prog)s {version()}",
+                   help="print the installed version and exit")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in modules.values():
         module.add_parser(sub)

@@ -35,7 +35,8 @@ def _study(scenario: Any, out: Path, no_plots: bool) -> None:
         from ..report.figures import study
 
         for key, group in runs.items():
-            study(key, group, out / f"study_{key.replace('.', '_')}.png", scenario.name)
+            study(key, group, out / f"study_{key.replace('.', '_')}.png", scenario.name,
+                  model=scenario.setup.controller.model)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -50,7 +51,7 @@ def main(args: argparse.Namespace) -> int:
     if not args.no_plots:
         from ..report.figures import save_figures
 
-        save_figures(result, out, title=scenario.name)
+        save_figures(result, out, title=scenario.name, model=scenario.setup.controller.model)
     print(summary(scenario.name, metrics(result)))
     if scenario.study:
         _study(scenario, out, args.no_plots)

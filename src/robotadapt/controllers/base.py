@@ -10,8 +10,9 @@ Controllers never see the true φ; only the optional monitors (`lyapunov`) take 
 
 Optional parts a controller may have, each a protocol below: a Lyapunov function, a filtered error, a regressor with its
 passivity output (for the integral (6.4.4)), acceleration feedback (Table 6.2.1 needs q̈), and a projection of its state
-applied after every integration step. A controller may raise :class:`SimulationStop` when its own assumptions fail
-(e.g. M̂ singular); the simulator ends the run there and keeps the partial result.
+applied after every integration step. A law whose own assumptions can fail on a state (M̂ singular) raises
+:class:`SimulationStop` there on numpy arrays and has a guard (:class:`HasGuard`), the indicator a compiled loop reads
+instead (traced code cannot raise). Either way the simulator ends the run there and keeps the partial result.
 """
 
 from __future__ import annotations
@@ -74,6 +75,19 @@ class NeedsAcceleration(ControlLaw, Protocol):
 
     def update(self, t: Array, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference) -> Array:
         """dx/dt with the measured q̈ (6.2.19)."""
+
+
+@runtime_checkable
+class HasGuard(Protocol):
+    """A law whose assumptions can fail on a state (adaptive computed torque: M̂(q) must stay positive definite). On
+    numpy arrays its torque or update raises :class:`SimulationStop` there; traced arrays cannot raise, so there it
+    returns NaN and a compiled loop reads `guard` at every evaluation and stops the run itself, with `stop_reason`."""
+
+    def guard(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        """True where the law's assumption holds at (x, q), a boolean of shape `x.shape[:-1]`. Raises nothing."""
+
+    def stop_reason(self, q: Array, x: Array) -> str:
+        """Why a run stops at (q, x) where the guard fails: the :class:`SimulationStop` message (numpy arrays)."""
 
 
 @runtime_checkable
@@ -159,3 +173,28 @@ def estimate(obj: Any, name: str = "phi_hat0") -> None:
 
 def inverse(A: Array) -> Array:
     return np.linalg.inv(A)
+
+
+def positive_definite(xp: Any, A: Array) -> Array:
+    """Per matrix of `A` (`(..., n, n)`, symmetric): True where it is positive definite, shape `(...)`; False for
+    non-finite entries. The Cholesky test: in closed form for n ≤ 2 (a₁₁ > 0 and det A > 0, Sylvester), else a finite
+    Cholesky factor, which numpy refuses for the whole stack (LinAlgError: asked again matrix by matrix) and JAX
+    returns with NaNs. Raises nothing and writes nothing, so that a compiled loop can trace it."""
+    n = A.shape[-1]
+    if n == 1:
+        return A[..., 0, 0] > 0
+    if n == 2:
+        return (A[..., 0, 0] > 0) & (A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0] > 0)
+    if xp is np:
+        try:
+            return np.all(np.isfinite(np.linalg.cholesky(A)), axis=(-2, -1))
+        except np.linalg.LinAlgError:
+            return np.array([_cholesky_ok(a) for a in A.reshape(-1, n, n)], dtype=bool).reshape(A.shape[:-2])
+    return xp.all(xp.isfinite(xp.linalg.cholesky(A)), axis=(-2, -1))
+
+
+def _cholesky_ok(A: Array) -> bool:
+    try:
+        return bool(np.all(np.isfinite(np.linalg.cholesky(A))))
+    except np.linalg.LinAlgError:
+        return False

@@ -2,9 +2,11 @@
 
 The update law needs the measured joint acceleration q̈ and the inverse of the estimated mass matrix M̂(q), so the
 controller implements :class:`~robotadapt.controllers.base.NeedsAcceleration` (the simulator hands it the plant's q̈
-for the torque it just applied; the torque itself does not need q̈) and stops the run with
-:class:`~robotadapt.controllers.base.SimulationStop` when M̂ loses definiteness. An optional box projection of φ̂ keeps
-M̂ invertible (spec §2.2 "Projection").
+for the torque it just applied; the torque itself does not need q̈). Where M̂ loses definiteness the update raises
+:class:`~robotadapt.controllers.base.SimulationStop` on numpy arrays; a compiled run reads the law's guard
+(:class:`~robotadapt.controllers.base.HasGuard`) instead and stops there too, with the same status. An optional box
+projection of φ̂ keeps M̂ invertible (spec §2.2 "Projection"). The equations are written against the array API of their
+inputs, so numpy and JAX run the same code.
 """
 
 from __future__ import annotations
@@ -15,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from .._array import matvec, quad
+from .._array import array_namespace, matvec, quad, solve
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_vector
-from .base import Array, SimulationStop, errors, estimate, freeze, gains, inverse
+from .base import Array, SimulationStop, errors, estimate, freeze, gains, inverse, positive_definite
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,7 +139,7 @@ class AdaptiveComputedTorque:
 
     def phi_hat(self, x: Array) -> Array:
         """φ̂: the state clipped into the box (the state itself without bounds)."""
-        return np.clip(x, *self.bounds)
+        return array_namespace(x).clip(x, *self.bounds)
 
     def project(self, x: Array) -> Array:
         """Clip the state into the box after each fixed step."""
@@ -145,30 +147,43 @@ class AdaptiveComputedTorque:
 
     def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         """E1 = Bᵀ P [e; ė] = P12ᵀ e + P22 ė (6.2.19); ½ e + ė with the book's P."""
-        return np.concatenate(errors(q, dq, ref), axis=-1) @ self._BtP.T
+        return array_namespace(q).concatenate(errors(q, dq, ref), axis=-1) @ self._BtP.T
 
     def torque(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         """τ = Y(q, q̇, q̇, q̈_d + K_v ė + K_p e) φ̂ (6.2.5)."""
         e, de = errors(q, dq, ref)
         return matvec(self.model.regressor(q, dq, dq, ref.ddq_des + de @ self.Kv.T + e @ self.Kp.T), self.phi_hat(x))
 
+    def guard(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        """M̂(q) positive definite, per run: what the update (6.2.19) needs (HasGuard)."""
+        return positive_definite(array_namespace(x, q), self.model.mass_matrix(q, self.phi_hat(x)))
+
     def update(self, t: Array, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference) -> Array:
-        """dφ̂/dt = Γ Wᵀ M̂⁻¹ E1 (6.2.19), zero where it points out of the box; SimulationStop if M̂(q) is not PD."""
+        """dφ̂/dt = Γ Wᵀ M̂⁻¹ E1 (6.2.19), zero where it points out of the box. Where M̂(q) is not positive definite:
+        SimulationStop on numpy arrays, NaN on traced ones (which cannot raise; the loop reads `guard`)."""
+        xp = array_namespace(x, q)
         phi_hat = self.phi_hat(x)
         M_hat = self.model.mass_matrix(q, phi_hat)
-        try:
-            np.linalg.cholesky(M_hat)
-        except np.linalg.LinAlgError:
-            raise SimulationStop(_not_pd(M_hat, phi_hat)) from None
+        ok = positive_definite(xp, M_hat)
+        if xp is np and not np.all(ok):
+            raise SimulationStop(_not_pd(M_hat, phi_hat))
+        M_hat = xp.where(ok[..., None, None], M_hat, xp.eye(self.model.n))  # solve would raise on a singular M̂
         W = self.model.regressor(q, dq, dq, ddq)
-        dx = matvec(W.mT, np.linalg.solve(M_hat, self.filtered_error(t, x, q, dq, ref)[..., None])[..., 0]) @ self.Gamma.T
+        dx = matvec(W.mT, solve(xp, M_hat, self.filtered_error(t, x, q, dq, ref))) @ self.Gamma.T
         lo, hi = self.bounds
-        return np.where(((x <= lo) & (dx < 0)) | ((x >= hi) & (dx > 0)), 0.0, dx)
+        dx = xp.where(((x <= lo) & (dx < 0)) | ((x >= hi) & (dx > 0)), 0.0, dx)
+        return dx if xp is np else xp.where(ok[..., None], dx, xp.nan)
+
+    def stop_reason(self, q: Array, x: Array) -> str:
+        """The SimulationStop message for a state (numpy arrays) whose M̂(q) is not positive definite."""
+        phi_hat = self.phi_hat(np.asarray(x))
+        return _not_pd(self.model.mass_matrix(np.asarray(q), phi_hat), phi_hat)
 
     def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
         """V = xᵀ P x + φ̃ᵀ Γ⁻¹ φ̃ (6.2.11) with x = [e; ė] and the true φ."""
         P = self.lyapunov_pair[0]
-        return quad(np.concatenate(errors(q, dq, ref), axis=-1), P) + quad(phi - self.phi_hat(x), self._Gamma_inv)
+        e = array_namespace(q).concatenate(errors(q, dq, ref), axis=-1)
+        return quad(e, P) + quad(phi - self.phi_hat(x), self._Gamma_inv)
 
 
 def _check_pd(S: Array, field: str, what: str) -> None:

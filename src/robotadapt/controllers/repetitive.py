@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from .._array import array_namespace
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_scalar, as_vector
@@ -87,8 +88,9 @@ class Repetitive:
         return np.zeros((round(self.period / dt), self.model.n))
 
     def sample(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, past: Array) -> tuple[Array, Array]:
-        """Hold sat(û_d(t − T)) for this step; store û_d(t) = that + k_L r(t)."""
-        held = past if self.u_min is None else np.clip(past, self.u_min, self.u_max)
+        """Hold sat(û_d(t − T)) for this step; store û_d(t) = that + k_L r(t). Pure (array API): the simulator keeps
+        the line in its carried state, numpy or compiled."""
+        held = past if self.u_min is None else array_namespace(past).clip(past, self.u_min, self.u_max)
         return held, held + self.kL * self.filtered_error(t, x, q, dq, ref)
 
     def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:

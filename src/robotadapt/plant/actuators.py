@@ -6,7 +6,9 @@ The actuator acts at the control ticks k (sampled-data mode), in this order:
     u_k  = u_{k−1} + clip(sat(τ_k) − u_{k−1}, −R Ts, R Ts),   sat(τ)_i = clip(τ_i, −L_i, L_i),   u_{−1} = 0
 
 so |u_k| ≤ L and |u_k − u_{k−1}| ≤ R Ts at every tick; u_k is held over [k Ts, (k+1) Ts). In continuous time only the
-saturation applies (u = sat(τ)); rate limits and delays need a control period.
+saturation applies (u = sat(τ)); rate limits and delays need a control period. The actuator is pure: its state (u_{k−1}
+and the d commands in flight, oldest first) comes in and goes out, `u, state = actuator.apply(state, τ, Ts)`, written
+against the array API of its inputs (numpy, or JAX inside the compiled loop).
 
 The DC motor (per joint, armature resistance R, inductance L, torque constant k_t, back-EMF constant k_b, gear ratio N,
 rotor inertia J_m) turns the applied torque command u into a current through a proportional current loop of gain K_c:
@@ -21,11 +23,12 @@ L/(R + K_c), the back-EMF damping k_t k_b N²/(R + K_c) of the joint, the rotor 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from .._array import array_namespace
 from ..validation import ConfigError, as_vector
 
 Array = Any
@@ -64,21 +67,24 @@ class Actuator:
 
     def saturate(self, tau: Array) -> Array:
         """sat(τ), or τ itself without a torque limit."""
-        return tau if self.torque_limit is None else np.clip(tau, -self.torque_limit, self.torque_limit)
+        if self.torque_limit is None:
+            return tau
+        return array_namespace(tau).clip(tau, -self.torque_limit, self.torque_limit)
 
     def start(self) -> tuple[Array, Array]:
-        """The state before the first tick: (u_{−1} = 0, the d commands in flight = 0)."""
+        """The state before the first tick: (u_{−1} = 0, the d commands in flight = 0, shape `(d, n)`)."""
         return np.zeros(self.n), np.zeros((self.delay_samples, self.n))
 
     def apply(self, state: tuple[Array, Array], tau: Array, Ts: float) -> tuple[Array, tuple[Array, Array]]:
-        """(u_k, next state) for the command τ computed at this tick."""
+        """(u_k, next state) for the command τ computed at this tick; nothing is written in place."""
         u_prev, queue = state
+        xp = array_namespace(tau, u_prev)
         if self.delay_samples:
-            tau, queue = queue[0], np.concatenate([queue[1:], tau[None]])
+            tau, queue = queue[0], xp.concatenate([queue[1:], tau[None]])
         u = self.saturate(tau)
         if self.torque_rate_limit is not None:
             step = self.torque_rate_limit * Ts
-            u = u_prev + np.clip(u - u_prev, -step, step)
+            u = u_prev + xp.clip(u - u_prev, -step, step)
         return u, (u, queue)
 
     def describe(self) -> dict[str, Any]:
@@ -106,6 +112,8 @@ class DCMotor:
     rotor_inertia: Any = 0.0
     current_gain: Any = 0.0
     voltage_limit: Any = None
+    # J_m ≠ 0 somewhere: a flag, so that a compiled loop, whose float arrays are traced, can still choose the plant's branch
+    has_rotor_inertia: bool = field(init=False, repr=False, metadata={"internal": True})
 
     def __post_init__(self) -> None:
         f = "plant.motor"
@@ -118,6 +126,7 @@ class DCMotor:
             object.__setattr__(self, name, value)
         if self.voltage_limit is not None:
             object.__setattr__(self, "voltage_limit", _positive(self.voltage_limit, self.n, f"{f}.voltage_limit"))
+        object.__setattr__(self, "has_rotor_inertia", bool(np.any(self.rotor_inertia)))
 
     @property
     def reflected_inertia(self) -> Array:
@@ -138,7 +147,7 @@ class DCMotor:
         i_ref = u / (self.gear_ratio * self.k_t)
         v = self.R * i_ref + self.current_gain * (i_ref - i)
         if self.voltage_limit is not None:
-            v = np.clip(v, -self.voltage_limit, self.voltage_limit)
+            v = array_namespace(v).clip(v, -self.voltage_limit, self.voltage_limit)
         return (v - self.R * i - self.k_b * self.gear_ratio * speed) / self.L
 
     def describe(self) -> dict[str, Any]:

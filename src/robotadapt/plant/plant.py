@@ -153,11 +153,11 @@ class Plant:
         if self.disturbance is not None:
             tau = tau - self.disturbance(t, q, dq)
         phi = self.phi_at(t)
-        if self.motor is None or self.elastic_joint is not None or not np.any(self.motor.reflected_inertia):
+        if self.motor is None or self.elastic_joint is not None or not self.motor.has_rotor_inertia:
             return self.model.forward_dynamics(q, dq, tau, phi)
         xp = array_namespace(q, dq, tau)
         bias = matvec(self.model.regressor(q, dq, dq, 0.0 * dq), phi)
-        M = self.model.mass_matrix(q, phi) + np.diag(self.motor.reflected_inertia)
+        M = self.model.mass_matrix(q, phi) + xp.diag(xp.asarray(self.motor.reflected_inertia))
         return solve(xp, M, tau - bias)
 
     def derivative(self, t: Array, s: Array, u: Array) -> Array:
@@ -165,8 +165,9 @@ class Plant:
         :mod:`robotadapt.unmodeled` and :mod:`robotadapt.actuators`)."""
         n = self.model.n
         q, dq = s[..., :n], s[..., n : 2 * n]
+        xp = array_namespace(s, u)
         if self.elastic_joint is None and self.motor is None:
-            return np.concatenate([dq, self.acceleration(t, q, dq, u)], axis=-1)
+            return xp.concatenate([dq, self.acceleration(t, q, dq, u)], axis=-1)
         extra = self.extra_series(s)
         speed = extra["motor_velocity"] if self.elastic_joint is not None else dq
         drive = u if self.motor is None else self.motor.torque(extra["current"])
@@ -178,7 +179,7 @@ class Plant:
             out = [dq, self.acceleration(t, q, dq, spring), speed, (drive - spring) / J]
         if self.motor is not None:
             out.append(self.motor.current_rate(u, extra["current"], speed))
-        return np.concatenate(out, axis=-1)
+        return xp.concatenate(out, axis=-1)
 
     @property
     def fastest_rate(self) -> float:

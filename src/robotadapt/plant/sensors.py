@@ -10,8 +10,15 @@
     q̈_m,k = (q̇_m,k − q̇_m,k−1)/Ts                           for controllers with acceleration feedback (Table 6.2.1)
 
 n_q, n_q̇ are independent normal draws of standard deviation `noise_q`, `noise_dq` (per joint or one for all), from
-`np.random.default_rng(seed)`: the same seed gives the same run bit for bit. At k = 0 the arm's initial velocity is known:
-the first difference and the filter start from q̇(0) (q_m,−1 = q_m,0 − Ts q̇(0), v_{−1} = q̇(0)), and q̈_m,0 = 0.
+`np.random.default_rng(seed)`, in the order tick 0 (n_q,0 then n_q̇,0, each only if set), tick 1, …: the same seed gives the
+same run bit for bit. The loop draws them ahead, a block of ticks at a time (:meth:`Sensor.noise`; one draw of many numbers
+is the same stream as many draws of one), and hands each tick its row, so the numpy and the compiled loops see the same
+numbers. At k = 0 the arm's initial velocity is known: the first difference and the filter start from q̇(0)
+(q_m,−1 = q_m,0 − Ts q̇(0), v_{−1} = q̇(0)), and q̈_m,0 = 0.
+
+The sensor is pure: the measurement path's state (q_m,k−1, v_k−1, q̇_m,k−1 and whether k = 0) comes in and goes out,
+`(q_m, q̇_m, q̈_m), state = sensor.measure(state, q, q̇, noise, Ts)`, written against the array API of its inputs (numpy,
+or JAX inside the compiled loop).
 """
 
 from __future__ import annotations
@@ -21,10 +28,12 @@ from typing import Any
 
 import numpy as np
 
+from .._array import array_namespace
 from ..validation import ConfigError, as_scalar, as_vector
 
 Array = Any
 VELOCITY = ("exact", "difference", "filter")
+State = tuple[Array, Array, Array, Array]  # (q_m,k−1, v_k−1, q̇_m,k−1, k = 0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,17 +63,49 @@ class Sensor:
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
             raise ConfigError("plant.seed", f"expected a whole number ≥ 0, got {seed!r}")
 
-    def start(self, q0: Array, dq0: Array, Ts: float) -> Measurement:
-        """The running measurement path of one run, from the initial state."""
-        q_m = self._quantize(np.asarray(q0, dtype=float))
+    def start(self, q0: Array, dq0: Array, Ts: float) -> State:
+        """The measurement path's state before tick 0, from the initial state (module docstring)."""
         dq0 = np.asarray(dq0, dtype=float)
-        a = 0.0 if self.velocity_cutoff is None else float(np.exp(-2 * np.pi * self.velocity_cutoff * Ts))
-        return Measurement(self, Ts, a, np.random.default_rng(self.seed), q_m - Ts * dq0, dq0, None)
+        return self.quantize(np.asarray(q0, dtype=float)) - Ts * dq0, dq0, np.zeros(self.n), np.asarray(True)
 
-    def _quantize(self, q: Array) -> Array:
+    def generator(self) -> np.random.Generator:
+        """The run's random generator, from `seed`."""
+        return np.random.default_rng(self.seed)
+
+    def noise(self, rng: np.random.Generator, count: int) -> Array:
+        """The standard normal draws of the next `count` ticks from `rng`, shape `(count, 2, n)`: row 0 for q, row 1
+        for q̇, zeros for a noise that is not set (nothing drawn for it), in the order of the module docstring."""
+        sources = (self.noise_q is not None, self.noise_dq is not None)
+        draws = iter(np.moveaxis(rng.standard_normal((count, sum(sources), self.n)), 1, 0))
+        return np.stack([next(draws) if on else np.zeros((count, self.n)) for on in sources], axis=1)
+
+    def coefficient(self, Ts: float) -> float:
+        """The velocity filter's a = exp(−2π f_c Ts) (0 without a filter)."""
+        return 0.0 if self.velocity_cutoff is None else float(np.exp(-2 * np.pi * self.velocity_cutoff * Ts))
+
+    def quantize(self, q: Array) -> Array:
+        """Δ round(q/Δ), or q itself without an encoder (ties to even)."""
         if self.encoder_resolution is None:
             return q
-        return self.encoder_resolution * np.round(q / self.encoder_resolution)
+        return self.encoder_resolution * array_namespace(q).round(q / self.encoder_resolution)
+
+    def measure(self, state: State, q: Array, dq: Array, noise: Array, Ts: float) -> tuple[tuple[Array, Array, Array],
+                                                                                           State]:
+        """((q_m, q̇_m, q̈_m), next state) at this tick from the true (q, q̇) and the tick's draws `noise` `(2, n)`."""
+        xp = array_namespace(q, dq)
+        q_prev, v_prev, dq_prev, first = state
+        q_m = self.quantize(q)
+        if self.noise_q is not None:
+            q_m = q_m + self.noise_q * noise[0]
+        v = dq
+        if self.velocity != "exact":
+            v = (q_m - q_prev) / Ts
+            if self.velocity == "filter":
+                a = self.coefficient(Ts)
+                v = a * v_prev + (1.0 - a) * v
+        dq_m = v if self.noise_dq is None else v + self.noise_dq * noise[1]
+        ddq_m = xp.where(first, 0.0, (dq_m - dq_prev) / Ts)
+        return (q_m, dq_m, ddq_m), (q_m, v, dq_m, xp.zeros_like(first))
 
     def describe(self) -> dict[str, Any]:
         out: dict[str, Any] = {"velocity": self.velocity}
@@ -76,34 +117,3 @@ class Sensor:
         if self.noise_q is not None or self.noise_dq is not None:
             out["seed"] = int(self.seed)
         return out
-
-
-@dataclass
-class Measurement:
-    """The state of one run's measurement path: the random generator and the previous samples (owned by the loop)."""
-
-    sensor: Sensor
-    Ts: float
-    a: float
-    rng: np.random.Generator
-    q_prev: Array
-    v_prev: Array
-    dq_prev: Array | None
-
-    def __call__(self, q: Array, dq: Array) -> tuple[Array, Array, Array]:
-        """(q_m, q̇_m, q̈_m) at this tick from the true (q, q̇)."""
-        s = self.sensor
-        q_m = s._quantize(q)
-        if s.noise_q is not None:
-            q_m = q_m + s.noise_q * self.rng.standard_normal(s.n)
-        if s.velocity == "exact":
-            v = dq
-        else:
-            v = (q_m - self.q_prev) / self.Ts
-            if s.velocity == "filter":
-                v = self.a * self.v_prev + (1.0 - self.a) * v
-        self.q_prev, self.v_prev = q_m, v
-        dq_m = v if s.noise_dq is None else v + s.noise_dq * self.rng.standard_normal(s.n)
-        ddq_m = np.zeros(s.n) if self.dq_prev is None else (dq_m - self.dq_prev) / self.Ts
-        self.dq_prev = dq_m
-        return q_m, dq_m, ddq_m

@@ -1,8 +1,18 @@
-"""Book-style figures of a run: tracking error, parameter estimates against the truth, torques (one PNG each)."""
+"""Book-style figures of a run: tracking error, parameter estimates against the truth, torques (one PNG each), and
+the overlays of a one-at-a-time study.
+
+Axes carry units: rad or m per joint type (revolute or prismatic), N·m or N for the control input, and per parameter
+the unit its name implies (kg for masses, kg·m for first moments, kg·m² for inertias, N·m·s/rad or N·s/m for viscous
+friction, N·m or N for Coulomb friction). The joint types come from the model (:func:`joint_types`); without a model
+the axes say "rad or m". Symbols are matplotlib mathtext ($e_1$, $\\hat\\varphi$). Each `*_figure` function returns the
+matplotlib Figure (to inspect or save elsewhere); the functions without the suffix write the PNG and close it.
+"""
 
 from __future__ import annotations
 
 import os
+import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -10,94 +20,281 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 
 from ..files import atomic_write, writable_dir  # noqa: E402
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from ..sim.result import SimulationResult
 
+#: line styles that stay apart when curves coincide or the page is printed in grey
+DASHES = ("-", "--", "-.", ":")
+MARKERS = ("o", "s", "^", "v", "D", "x")
+#: units by joint type: "R" revolute, "P" prismatic, "?" not known
+POSITION = {"R": "rad", "P": "m", "?": "rad or m"}
+EFFORT = {"R": "N·m", "P": "N", "?": "N·m or N"}
+EFFORT_NAME = {"R": "torque", "P": "force", "?": "torque or force"}
+JOINT_NAME = {"R": "revolute joints", "P": "prismatic joints", "?": "joints"}
+#: above this many parameters one line each is unreadable: the figure shows the relative error instead
+MAX_PARAMETER_LINES = 8
 
-def _finish(fig: Any, ax: Any, title: str, path: Path) -> Path:
-    ax.set_title(title)
-    ax.set_xlabel("t (s)")
-    ax.grid(True, alpha=0.3)
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="best", fontsize="small")
+
+# ---------------------------------------------------------------------------------------------------------------------
+# what a model says about units
+
+
+def _pin_kind(shortname: str) -> str | None:
+    """'R' or 'P' from a Pinocchio joint model's short name (JointModelRZ, JointModelPrismaticUnaligned, ...)."""
+    kind = shortname.removeprefix("JointModel")[:1]
+    return kind if kind in ("R", "P") else None
+
+
+def joint_types(model: Any) -> str | None:
+    """'R' (revolute) or 'P' (prismatic) per joint, e.g. ``"RP"`` for the polar arm; None when the model does not say.
+
+    Read from `model.joint_types` when the model has it, else from what each kind of model holds: the `joints` string
+    of the DH arms, the joint models of a Pinocchio arm, the standard model under base parameters, the textbook arms.
+    """
+    from ..robots.one_link import OneLinkArm
+    from ..robots.polar import PolarArm
+    from ..robots.two_link import TwoLinkArm
+
+    for attr in ("joint_types", "joints"):
+        value = getattr(model, attr, None)
+        if isinstance(value, str) and value and set(value) <= {"R", "P"}:
+            return value
+    pin_model = getattr(model, "pin_model", None)
+    if pin_model is not None:
+        kinds = [_pin_kind(pin_model.joints[j].shortname()) for j in range(1, pin_model.njoints)]
+        return "".join(k for k in kinds if k) if all(kinds) else None
+    basis = getattr(model, "basis", None)
+    if basis is not None and hasattr(basis, "model"):
+        return joint_types(basis.model)
+    textbook: tuple[tuple[type, str], ...] = ((OneLinkArm, "R"), (TwoLinkArm, "RR"), (PolarArm, "RP"))
+    return next((joints for cls, joints in textbook if isinstance(model, cls)), None)
+
+
+#: parameter name (without the joint number) → unit for a revolute joint, for a prismatic one
+_UNITS = {"m": ("kg", "kg"), "mx": ("kg·m", "kg·m"), "my": ("kg·m", "kg·m"), "mz": ("kg·m", "kg·m"),
+          **{f"I{a}": ("kg·m²", "kg·m²") for a in ("xx", "xy", "yy", "xz", "yz", "zz")},
+          "Ia": ("kg·m²", "kg"), "fv": ("N·m·s/rad", "N·s/m"), "fc": ("N·m", "N")}
+#: the one-link arm's parameters (its `m` is the joint's inertia)
+_ONE_LINK = {"m": "kg·m²", "b": "N·m·s/rad", "k": "N·m/rad"}
+
+
+def parameter_unit(name: str, joints: str | None = None) -> str | None:
+    """The SI unit a parameter's name implies (`m2` kg, `mx1` kg·m, `Izz3` kg·m², `Ia1`, `fv1`, `fc1` by the type of
+    the joint its number names); None for names that imply none (base-parameter combinations)."""
+    match = re.fullmatch(r"([A-Za-z]+?)(\d*)", name)
+    if match is None or match.group(1) not in _UNITS:
+        return None
+    revolute, prismatic = _UNITS[match.group(1)]
+    if revolute == prismatic:
+        return revolute
+    index = int(match.group(2) or 0) - 1
+    kind = joints[index] if joints is not None and 0 <= index < len(joints) else "?"
+    return {"R": revolute, "P": prismatic}.get(kind, f"{revolute} or {prismatic}")
+
+
+def parameter_units(model: Any, names: Sequence[str]) -> list[str | None]:
+    """The unit of each parameter: `model.param_units` when the model has it, else derived from the names."""
+    from ..robots.one_link import OneLinkArm
+
+    units = getattr(model, "param_units", None)
+    if units is not None and len(units) == len(names):
+        return list(units)
+    if isinstance(model, OneLinkArm):
+        return [_ONE_LINK.get(name) for name in names]
+    joints = joint_types(model) if model is not None else None
+    return [parameter_unit(name, joints) for name in names]
+
+
+def tex_name(name: str, hat: bool = False) -> str:
+    """A parameter name in mathtext: `m2` → $m_{2}$, `fv1` → $f_{v1}$, `Izz3` → $I_{zz3}$ (with `hat`, $\\hat{m}_{2}$);
+    names that are not a symbol and subscript (base-parameter combinations) as they are."""
+    match = re.fullmatch(r"([A-Za-z])([A-Za-z]*\d*)", name)
+    if match is None:
+        return ("estimate of " if hat else "") + name
+    base = rf"\hat{{{match.group(1)}}}" if hat else match.group(1)
+    return f"${base}_{{{match.group(2)}}}$" if match.group(2) else f"${base}$"
+
+
+def joint_groups(n: int, joints: str | None) -> list[tuple[str, list[int]]]:
+    """(joint type, joint indices) per panel: revolute joints, then prismatic ones; one group "?" when not known."""
+    if joints is None or len(joints) != n:
+        return [("?", list(range(n)))]
+    return [(kind, [i for i in range(n) if joints[i] == kind]) for kind in "RP" if kind in joints]
+
+
+def norm_unit(table: dict[str, str], joints: str | None) -> str:
+    """The unit of a norm over all joints: one unit when every joint has the same type, else both."""
+    kinds = set(joints) if joints else {"?"}
+    return table[kinds.pop()] if len(kinds) == 1 else f"{table['R']} and {table['P']} mixed"
+
+
+def style(i: int) -> dict[str, Any]:
+    """The i-th line's colour (qualitative tab10), dash and hollow marker: (colour, dash) pairs are unique for i < 20,
+    neighbours differ in all three, and the markers of curves that coincide sit at different places."""
+    return {"color": plt.get_cmap("tab10")(i % 10), "linestyle": DASHES[i % len(DASHES)],
+            "marker": MARKERS[i % len(MARKERS)], "markevery": (0.023 * (i % 5), 0.12), "markersize": 4.5,
+            "markerfacecolor": "none"}
+
+
+def positive(y: np.ndarray) -> np.ndarray:
+    """`y` with values ≤ 0 left out (NaN): a log axis then starts at the first nonzero value (e(0) = 0 is no datum)."""
+    y = np.asarray(y, dtype=float)
+    return np.where(y > 0, y, np.nan)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the figures of one run
+
+
+def _panels(k: int, height: float = 2.6) -> tuple[Figure, list[Any]]:
+    fig, axes = plt.subplots(k, 1, figsize=(7, 1.4 + height * k), sharex=True, squeeze=False)
+    return fig, list(axes[:, 0])
+
+
+def _finish(fig: Figure, axes: list[Any], title: str) -> Figure:
+    fig.suptitle(title)
+    axes[-1].set_xlabel("time $t$ (s)")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="best", fontsize="small")
     fig.tight_layout()
+    return fig
+
+
+def _save(fig: Figure, path: Path) -> Path:
     atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
     plt.close(fig)
     return path
 
 
-def tracking_error(res: SimulationResult, path: Path, title: str = "") -> Path:
-    """e_i(t) = q_des,i − q_i for every joint."""
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for i in range(res.e.shape[-1]):
-        ax.plot(res.t, res.e[:, i], label=f"e{i + 1}")
-    ax.set_ylabel("tracking error (rad or m)")
-    return _finish(fig, ax, f"{title} — tracking error".strip(" —"), path)
+def _title(title: str, what: str) -> str:
+    return f"{title} — {what}" if title else what[:1].upper() + what[1:]
 
 
-#: above this many parameters one line each is unreadable: the figure shows the relative error instead
-MAX_PARAMETER_LINES = 8
+def tracking_error_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
+    """e_i(t) = q_d,i − q_i for every joint: one panel per joint type (rad for revolute, m for prismatic joints)."""
+    groups = joint_groups(res.e.shape[-1], joint_types(model) if model is not None else None)
+    fig, axes = _panels(len(groups))
+    for ax, (kind, joints) in zip(axes, groups, strict=True):
+        for i in joints:
+            ax.plot(res.t, res.e[:, i], label=f"$e_{{{i + 1}}}$", **style(i))
+        ax.set_ylabel(f"tracking error $e_i$ ({POSITION[kind]})")
+        if len(groups) > 1:
+            ax.set_title(JOINT_NAME[kind].removesuffix("s" if len(joints) == 1 else ""), fontsize="medium")
+    return _finish(fig, axes, _title(title, "tracking error $e = q_d - q$"))
 
 
-def parameters(res: SimulationResult, path: Path, title: str = "") -> Path:
-    """φ̂(t), solid, with the true φ(t) dashed in the same colour when known; for more than `MAX_PARAMETER_LINES`
-    parameters (n-DOF arms) the relative error ‖φ̃(t)‖ / ‖φ(t)‖ when the truth is known, else ‖φ̂(t)‖."""
-    import numpy as np
+def torques_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
+    """Controller output τ_i(t): torques (N·m) at revolute joints, forces (N) at prismatic ones, a panel each."""
+    groups = joint_groups(res.tau.shape[-1], joint_types(model) if model is not None else None)
+    fig, axes = _panels(len(groups))
+    for ax, (kind, joints) in zip(axes, groups, strict=True):
+        for i in joints:
+            ax.plot(res.t, res.tau[:, i], label=f"$\\tau_{{{i + 1}}}$", **style(i))
+        ax.set_ylabel(f"{EFFORT_NAME[kind]} $\\tau_i$ ({EFFORT[kind]})")
+        if len(groups) > 1:
+            ax.set_title(JOINT_NAME[kind].removesuffix("s" if len(joints) == 1 else ""), fontsize="medium")
+    return _finish(fig, axes, _title(title, "control input $\\tau$"))
 
-    fig, ax = plt.subplots(figsize=(7, 4))
-    truth = res.phi_true
-    if not res.param_names:
-        ax.text(0.5, 0.5, "this controller estimates no parameters", ha="center", va="center", transform=ax.transAxes)
-    elif len(res.param_names) > MAX_PARAMETER_LINES:
-        if truth is not None and res.phi_err is not None:
-            rel = np.linalg.norm(res.phi_err, axis=-1) / np.maximum(np.linalg.norm(truth, axis=-1), 1e-300)
-            ax.semilogy(res.t, rel + 1e-16, label=f"‖φ − φ̂‖ / ‖φ‖ ({len(res.param_names)} parameters)")
-            ax.set_ylabel("relative parameter error")
+
+def _many_parameters(res: SimulationResult, ax: Any) -> None:
+    """‖φ̃(t)‖ / ‖φ(t)‖ when the truth is known, else ‖φ̂(t)‖: one line for an n-DOF arm's tens of parameters."""
+    p = len(res.param_names)
+    if res.phi_true is not None and res.phi_err is not None:
+        rel = np.linalg.norm(res.phi_err, axis=-1) / np.maximum(np.linalg.norm(res.phi_true, axis=-1), 1e-300)
+        ax.semilogy(res.t, positive(rel), label=f"{p} parameters")
+        ax.set_ylabel(r"$\Vert\varphi - \hat{\varphi}\Vert \,/\, \Vert\varphi\Vert$ (dimensionless)")
+    else:
+        ax.plot(res.t, np.linalg.norm(res.phi_hat, axis=-1), label=f"{p} parameters")
+        ax.set_ylabel(r"$\Vert\hat{\varphi}\Vert$ (mixed units)")
+
+
+def parameters_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
+    """φ̂(t) solid, the true φ(t) dashed with markers in the same colour when known (both stay visible where they
+    coincide); one panel per unit. For more than `MAX_PARAMETER_LINES` parameters (n-DOF arms) the relative error
+    ‖φ̃(t)‖ / ‖φ(t)‖ when the truth is known, else ‖φ̂(t)‖."""
+    names, truth = res.param_names, res.phi_true
+    if not names or len(names) > MAX_PARAMETER_LINES:
+        fig, axes = _panels(1)
+        if names:
+            _many_parameters(res, axes[0])
         else:
-            ax.plot(res.t, np.linalg.norm(res.phi_hat, axis=-1), label=f"‖φ̂‖ ({len(res.param_names)} parameters)")
-            ax.set_ylabel("‖φ̂‖")
-        return _finish(fig, ax, f"{title} — parameter estimates".strip(" —"), path)
-    for i, name in enumerate(res.param_names):
-        (line,) = ax.plot(res.t, res.phi_hat[:, i], label=f"{name} estimate")
-        if truth is not None:
-            ax.plot(res.t, truth[:, i], color=line.get_color(), linestyle="--", label=f"{name} true")
-    ax.set_ylabel("parameter")
-    return _finish(fig, ax, f"{title} — parameter estimates".strip(" —"), path)
+            axes[0].text(0.5, 0.5, "this controller estimates no parameters", ha="center", va="center",
+                         transform=axes[0].transAxes)
+        return _finish(fig, axes, _title(title, "parameter error" if truth is not None else "parameter estimates"))
+    units = parameter_units(model, names)
+    groups = list(dict.fromkeys(units))
+    fig, axes = _panels(len(groups), height=2.4)
+    for ax, unit in zip(axes, groups, strict=True):
+        for i, name in enumerate(names):
+            if units[i] != unit:
+                continue
+            ax.plot(res.t, res.phi_hat[:, i], label=tex_name(name, hat=True), color=style(i)["color"])
+            if truth is not None:
+                ax.plot(res.t, truth[:, i], color=style(i)["color"], linestyle="--", marker="o", markevery=0.1,
+                        markersize=4, markerfacecolor="none", label=f"{tex_name(name)} true")
+        ax.set_ylabel(r"$\hat{\varphi}_i$" + (r", $\varphi_i$" if truth is not None else "")
+                      + (f" ({unit})" if unit else ""))
+    what = r"estimates $\hat{\varphi}$ (solid), true $\varphi$ (dashed)" if truth is not None else \
+        r"estimates $\hat{\varphi}$"
+    return _finish(fig, axes, _title(title, f"parameter {what}"))
 
 
-def torques(res: SimulationResult, path: Path, title: str = "") -> Path:
-    """Controller output τ_i(t)."""
-    fig, ax = plt.subplots(figsize=(7, 4))
-    for i in range(res.tau.shape[-1]):
-        ax.plot(res.t, res.tau[:, i], label=f"tau{i + 1}")
-    ax.set_ylabel("torque (N·m) or force (N)")
-    return _finish(fig, ax, f"{title} — control input".strip(" —"), path)
+def tracking_error(res: SimulationResult, path: Path, title: str = "", model: Any = None) -> Path:
+    """Write :func:`tracking_error_figure` to `path`."""
+    return _save(tracking_error_figure(res, title, model), path)
 
 
-def save_figures(res: SimulationResult, directory: str | os.PathLike[str], title: str = "") -> list[Path]:
-    """Write `tracking_error.png`, `parameters.png` and `torques.png` into `directory`."""
+def parameters(res: SimulationResult, path: Path, title: str = "", model: Any = None) -> Path:
+    """Write :func:`parameters_figure` to `path`."""
+    return _save(parameters_figure(res, title, model), path)
+
+
+def torques(res: SimulationResult, path: Path, title: str = "", model: Any = None) -> Path:
+    """Write :func:`torques_figure` to `path`."""
+    return _save(torques_figure(res, title, model), path)
+
+
+def save_figures(res: SimulationResult, directory: str | os.PathLike[str], title: str = "",
+                 model: Any = None) -> list[Path]:
+    """Write `tracking_error.png`, `parameters.png` and `torques.png` into `directory`; `model` (the controller's)
+    gives the units (joint types, parameter units), else the axes say "rad or m"."""
     directory = writable_dir(directory)
-    return [tracking_error(res, directory / "tracking_error.png", title),
-            parameters(res, directory / "parameters.png", title),
-            torques(res, directory / "torques.png", title)]
+    return [tracking_error(res, directory / "tracking_error.png", title, model),
+            parameters(res, directory / "parameters.png", title, model),
+            torques(res, directory / "torques.png", title, model)]
 
 
-def study(key: str, runs: list[Any], path: Path, title: str = "") -> Path:
-    """Overlay of a one-at-a-time study: ‖e(t)‖ and ‖φ̃(t)‖ (or ‖φ̂(t)‖ when the truth is unknown), one line per value."""
-    import numpy as np
+# ---------------------------------------------------------------------------------------------------------------------
+# one-at-a-time studies
 
+
+def study_figure(key: str, runs: list[Any], title: str = "", model: Any = None) -> Figure:
+    """Overlay of a one-at-a-time study: ‖e(t)‖ and ‖φ̃(t)‖ (or ‖φ̂(t)‖ when the truth is unknown), one line per
+    value; log axes that start at the first nonzero value."""
+    joints = joint_types(model) if model is not None else None
     fig, (ax_e, ax_p) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    for run in runs:
+    known = bool(runs) and runs[0].result.phi is not None
+    for i, run in enumerate(runs):
         res = run.result
-        ax_e.semilogy(res.t, np.linalg.norm(res.e, axis=-1) + 1e-16, label=f"{key} = {run.value}")
+        ax_e.semilogy(res.t, positive(np.linalg.norm(res.e, axis=-1)), label=f"{key} = {run.value}", **style(i))
         err = res.phi_err if res.phi_err is not None else res.phi_hat
-        ax_p.semilogy(res.t, np.linalg.norm(err, axis=-1) + 1e-16, label=f"{key} = {run.value}")
-    ax_e.set_ylabel("‖e‖")
-    ax_e.grid(True, alpha=0.3)
-    ax_e.legend(loc="best", fontsize="small")
-    ax_p.set_ylabel("‖φ − φ̂‖" if runs and runs[0].result.phi is not None else "‖φ̂‖")
-    ax_e.set_title(f"{title} — effect of {key}".strip(" —"))
-    return _finish(fig, ax_p, "", path)
+        if err.shape[-1]:
+            ax_p.semilogy(res.t, positive(np.linalg.norm(err, axis=-1)), label=f"{key} = {run.value}", **style(i))
+    ax_e.set_ylabel(f"$\\Vert e(t)\\Vert$ ({norm_unit(POSITION, joints)})")
+    ax_p.set_ylabel(r"$\Vert\varphi - \hat{\varphi}(t)\Vert$" if known else r"$\Vert\hat{\varphi}(t)\Vert$")
+    ax_e.set_title("tracking error", fontsize="medium")
+    ax_p.set_title("parameter error" if known else "parameter estimate", fontsize="medium")
+    return _finish(fig, [ax_e, ax_p], _title(title, f"effect of {key}"))
+
+
+def study(key: str, runs: list[Any], path: Path, title: str = "", model: Any = None) -> Path:
+    """Write :func:`study_figure` to `path`."""
+    return _save(study_figure(key, runs, title, model), path)

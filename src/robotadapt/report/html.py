@@ -14,10 +14,11 @@ import html
 import io
 import json
 import time
+import unicodedata
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -30,8 +31,11 @@ from ..analysis.metrics import metrics  # noqa: E402
 from ..files import atomic_write, writable_dir  # noqa: E402
 from ..studies.compare import Row, flat, number_text  # noqa: E402
 from ..studies.scenarios import Scenario, book_scenarios, load  # noqa: E402
-from .figures import save_figures  # noqa: E402
+from .figures import EFFORT, POSITION, joint_types, norm_unit, positive, save_figures, style  # noqa: E402
 from .files import save_result  # noqa: E402
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 _STYLE = """body{font-family:system-ui,sans-serif;margin:2em;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:1em 0}th,td{border:1px solid #ccc;padding:4px 8px;text-align:right;vertical-align:top}
@@ -61,35 +65,71 @@ def _data_uri(png: bytes) -> str:
 # persistency of excitation
 
 
-def _log_with_zero(ax: Any, t: np.ndarray, y: np.ndarray, floor: float, label: str) -> None:
-    """Plot y ≥ 0 on a log axis; zeros (round-off) are drawn at `floor`, which then becomes the bottom of the axis."""
-    zero = bool(np.any(y <= floor))
-    ax.semilogy(t, np.maximum(y, floor), label=label + (" (0 drawn at the bottom)" if zero else ""))
+def _log_with_zero(ax: Any, t: np.ndarray, y: np.ndarray, floor: float, label: str, **kw: Any) -> None:
+    """Plot y ≥ 0 on a log axis from its first nonzero value (a sum that starts at 0 is no datum); later zeros (a
+    rank-deficient window: round-off) are drawn at `floor`, which then becomes the bottom of the axis."""
+    start = int(np.argmax(y > floor)) if np.any(y > floor) else 0
+    zero = bool(np.any(y[start:] <= floor))
+    ax.semilogy(t[start:], np.maximum(y[start:], floor), label=label + (" (0 drawn at the bottom)" if zero else ""),
+                **kw)
     if zero:
         ax.set_ylim(bottom=floor / 2)
+
+
+def _coincide(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and bool(np.allclose(a, b, rtol=1e-9, atol=0.0))
+
+
+#: the smaller eigenvalue's line where it may lie on the larger one: dashed, hollow markers on top
+_UNDER = {"linestyle": "-", "linewidth": 3.0, "alpha": 0.5}
+_OVER = {"linestyle": "--", "marker": "o", "markevery": 0.08, "markersize": 5, "markerfacecolor": "none"}
+
+
+def _pair(ax: Any, t: np.ndarray, high: np.ndarray, low: np.ndarray, floor: float, labels: tuple[str, str]) -> None:
+    """λ_max and λ_min on a log axis; where they coincide (one parameter) both stay visible: the larger one wide and
+    pale, the smaller one dashed with markers, and the legend says so."""
+    ax.semilogy(t, positive(high), label=labels[0], color="C0", **_UNDER)
+    note = " (the curves coincide: one parameter)" if _coincide(high, low) else ""
+    _log_with_zero(ax, t, low, floor, labels[1] + note, color="C1", **_OVER)
+
+
+def _power_of_ten(x: float) -> str:
+    """`x` in mathtext: 1e-06 → 10^{-6}, 2.5e-06 → 2.5·10^{-6}."""
+    mantissa, _, exponent = f"{x:.2g}".partition("e")
+    if not exponent:
+        return f"${mantissa}$"
+    factor = "" if mantissa == "1" else mantissa + r" \cdot "
+    return f"${factor}10^{{{int(exponent)}}}$"
+
+
+def excitation_plot(exc: Excitation, title: str = "") -> Figure:
+    """The figure of :func:`excitation_figure`, returned open."""
+    floor = 1e-12 * max(exc.beta_max, 1e-300)
+    fig, (ax_w, ax_c) = plt.subplots(2, 1, figsize=(7, 6.5))
+    _pair(ax_w, exc.t0, exc.beta, exc.alpha, floor, (r"$\beta(t_0) = \lambda_{\max}$", r"$\alpha(t_0) = \lambda_{\min}$"))
+    ax_w.axhline(exc.rtol * exc.beta_max, color="k", linestyle=":",
+                 label=f"PE threshold {_power_of_ten(exc.rtol)}" + r"$\,\max\,\beta$")
+    verdict = "persistently exciting" if exc.persistently_exciting else "NOT persistently exciting"
+    ax_w.set_title(f"{title}: {verdict} ($\\rho$ = {exc.window:.4g} s)".lstrip(": "))
+    ax_w.set_xlabel("window start $t_0$ (s)")
+    ax_w.set_ylabel(r"eigenvalues of $\int_{t_0}^{t_0+\rho} Y_d^T Y_d\,dt$")
+    _pair(ax_c, exc.t_cum, exc.lambda_max_cum, exc.lambda_min_cum, floor, (r"$\lambda_{\max}$", r"$\lambda_{\min}$"))
+    grows = "grows" if exc.integral_grows else "levels off"
+    ax_c.set_title(f"(6.6.18): $\\lambda_{{\\min}} \\int_0^t Y_d^T Y_d\\,d\\sigma$ {grows} "
+                   f"($\\propto t^{{{exc.growth_exponent:.2f}}}$ over the second half)")
+    ax_c.set_xlabel("time $t$ (s)")
+    ax_c.set_ylabel(r"eigenvalues of $\int_0^t Y_d^T Y_d\,d\sigma$")
+    for ax in (ax_w, ax_c):
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize="small")
+    fig.tight_layout()
+    return fig
 
 
 def excitation_figure(exc: Excitation, path: Path, title: str = "") -> Path:
     """α(t0), β(t0) of the windowed Gram matrix (6.5.2) with the PE threshold, and the extreme eigenvalues of the
     growing integral ∫_0^t Y_dᵀ Y_d (6.6.18); log scale, zero drawn at the bottom of the axis."""
-    floor = 1e-12 * max(exc.beta_max, 1e-300)
-    fig, (ax_w, ax_c) = plt.subplots(2, 1, figsize=(7, 6.5))
-    ax_w.semilogy(exc.t0, exc.beta, label="β(t0) = λ_max")
-    _log_with_zero(ax_w, exc.t0, exc.alpha, floor, "α(t0) = λ_min")
-    ax_w.axhline(exc.rtol * exc.beta_max, color="k", linestyle="--", label=f"PE threshold {exc.rtol:g}·max β")
-    verdict = "persistently exciting" if exc.persistently_exciting else "NOT persistently exciting"
-    ax_w.set_title(f"{title}: {verdict} (ρ = {exc.window:.4g} s)".lstrip(": "))
-    ax_w.set_xlabel("window start t0 (s)")
-    ax_w.set_ylabel("eigenvalues of ∫ Y_dᵀY_d over [t0, t0+ρ]")
-    ax_c.semilogy(exc.t_cum, exc.lambda_max_cum, label="λ_max")
-    _log_with_zero(ax_c, exc.t_cum, exc.lambda_min_cum, floor, "λ_min")
-    grows = "grows" if exc.integral_grows else "levels off"
-    ax_c.set_title(f"(6.6.18): λ_min ∫_0^t Y_dᵀY_d {grows} (∝ t^{exc.growth_exponent:.2f} over the second half)")
-    ax_c.set_xlabel("t (s)")
-    for ax in (ax_w, ax_c):
-        ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize="small")
-    fig.tight_layout()
+    fig = excitation_plot(exc, title)
     atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
     plt.close(fig)
     return path
@@ -125,7 +165,8 @@ def run_gallery(out: Path, t_final_cap: float | None = None, progress: bool = Fa
             scenario = load(name, [f"simulation.t_final={t_final_cap!r}"])
         wall = time.perf_counter()
         res = scenario.run(progress)
-        save_figures(res, save_result(res, out / name, scenario.text), title=name)  # what `robotadapt run` writes
+        save_figures(res, save_result(res, out / name, scenario.text), name,  # what `robotadapt run` writes
+                     scenario.setup.controller.model)
         wall = time.perf_counter() - wall
         entries.append(GalleryEntry(name, scenario.description, str(scenario.data.get("notes", "")),
                                     {k: scenario.data[k] for k in ("robot", "plant", "trajectory", "controller",
@@ -167,7 +208,7 @@ def gallery_html(entries: list[GalleryEntry]) -> str:
 # comparison of controllers
 
 
-COLUMNS = (("label", "controller", "{}"), ("status", "status", "{}"), ("rms_error", "RMS ‖e‖", "{:.3g}"),
+COLUMNS = (("label", "controller", "{}"), ("status", "status", "{}"), ("rms_error_norm", "RMS ‖e‖", "{:.3g}"),
            ("final_error", "final ‖e‖", "{:.3g}"), ("peak_torque", "peak |τ|", "{:.3g}"),
            ("control_energy", "energy ∫τᵀτ", "{:.4g}"), ("final_phi_error", "final ‖φ̃‖", "{:.3g}"),
            ("convergence_time", "t_conv (s)", "{:.3g}"), ("us_per_step", "µs/step", "{:.1f}"))
@@ -177,14 +218,23 @@ def _cell(value: Any, fmt: str) -> str:
     return "—" if value is None else fmt.format(value)
 
 
+def display_width(text: str) -> int:
+    """Columns `text` takes in a terminal: combining marks (the hat of φ̂) 0, wide East Asian characters 2."""
+    return sum(0 if unicodedata.combining(c) else 2 if unicodedata.east_asian_width(c) in "WF" else 1 for c in text)
+
+
+def _pad(text: str, width: int, left: bool) -> str:
+    fill = " " * max(width - display_width(text), 0)
+    return text + fill if left else fill + text
+
+
 def table_text(rows: list[Row]) -> str:
-    """The comparison table as aligned text (what `robotadapt compare` prints)."""
+    """The comparison table as aligned text (what `robotadapt compare` prints), padded by display width."""
     cells = [[title for _, title, _ in COLUMNS]]
     cells += [[_cell(r.metrics[k], fmt) if k != "status" else r.metrics[k].split(":")[0] for k, _, fmt in COLUMNS]
               for r in rows]
-    widths = [max(len(c[i]) for c in cells) for i in range(len(COLUMNS))]
-    return "\n".join("  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(line, widths,
-                                                                                                    strict=True)))
+    widths = [max(display_width(c[i]) for c in cells) for i in range(len(COLUMNS))]
+    return "\n".join("  ".join(_pad(c, w, i == 0) for i, (c, w) in enumerate(zip(line, widths, strict=True)))
                      for line in cells)
 
 
@@ -192,32 +242,79 @@ def _write_bytes(data: bytes, f: Any) -> None:
     f.write(data)
 
 
+#: the panels of the comparison figures: lineup names by family; a name in none (the scenario's own law) goes last
+FAMILIES = (("fixed estimates, no adaptation", ("computed_torque", "pd", "pd_gravity")),
+            ("Slotine–Li and its modifications", ("slotine_li", "sign_robust", "sigma", "composite")),
+            ("passivity class (Table 6.4.1)", ("passivity", "passivity_pi")),
+            ("computed torque, desired compensation, learning", ("adaptive_computed_torque", "dcal", "repetitive")))
+#: drawn in grey in the other panels, as a common reference
+REFERENCE = "slotine_li"
+
+
+def _families(rows: list[Row]) -> list[tuple[str, list[int]]]:
+    """(panel title, row indices) of the panels that have rows, in `FAMILIES` order; leftover rows in a last panel."""
+    placed = {name for _, names in FAMILIES for name in names}
+    panels = [(title, [i for i, r in enumerate(rows) if r.entry.name in names]) for title, names in FAMILIES]
+    panels.append(("other", [i for i, r in enumerate(rows) if r.entry.name not in placed]))
+    return [(title, idx) for title, idx in panels if idx]
+
+
+def _signal(row: Row, signal: str) -> np.ndarray | None:
+    res = row.result
+    y = {"e": res.e, "phi": res.phi_err, "tau": res.tau}[signal]
+    return None if y is None or y.shape[-1] == 0 else np.linalg.norm(y, axis=-1)
+
+
+def overlay_figure(rows: list[Row], signal: str) -> Figure:
+    """Small multiples of ‖e(t)‖, ‖φ̃(t)‖ (log scale, from each run's first nonzero value, over at most 12 decades)
+    or ‖τ(t)‖ (over 4): one panel per family of laws (`FAMILIES`), every law in its own colour and dash (the same in
+    every figure), Slotine–Li in grey behind the other panels."""
+    panels = _families(rows)
+    cols = 2 if len(panels) > 1 else 1
+    nrows = -(-len(panels) // cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(6.2 * cols, 1.2 + 3.2 * nrows), sharex=True, sharey=True,
+                             squeeze=False)
+    joints = joint_types(rows[0].entry.scenario.setup.controller.model) if rows else None
+    norms = [_signal(r, signal) for r in rows]
+    ref = next((i for i, r in enumerate(rows) if r.entry.name == REFERENCE and norms[i] is not None), None)
+    finite = [y[np.isfinite(y) & (y > 0)] for y in norms if y is not None]
+    top = max((float(v.max()) for v in finite if v.size), default=0.0)
+    low = min((float(v.min()) for v in finite if v.size), default=0.0)
+    for ax, (title, idx) in zip(axes.flat, panels, strict=False):
+        reference = norms[ref] if ref is not None and ref not in idx else None
+        if ref is not None and reference is not None:
+            ax.semilogy(rows[ref].result.t, positive(reference), color="0.75", linewidth=1.0,
+                        label=f"{rows[ref].entry.label} (reference)")
+        for i in idx:
+            y = norms[i]
+            if y is not None:
+                ax.semilogy(rows[i].result.t, positive(y), label=rows[i].entry.label, linewidth=1.4, **style(i))
+        ax.set_title(title, fontsize="medium")
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize="x-small")
+    for ax in axes.flat[len(panels):]:
+        ax.set_visible(False)
+    if top > 0:  # the axes share y
+        axes[0, 0].set_ylim(max(low, (1e-4 if signal == "tau" else 1e-12) * top) / 2, 3 * top)
+    ylabel = {"e": f"$\\Vert e(t)\\Vert$ ({norm_unit(POSITION, joints)})", "phi": r"$\Vert\varphi - \hat{\varphi}(t)\Vert$",
+              "tau": f"$\\Vert\\tau(t)\\Vert$ ({norm_unit(EFFORT, joints)})"}[signal]
+    for ax in axes[:, 0]:
+        ax.set_ylabel(ylabel)
+    for ax in axes[-1, :]:
+        ax.set_xlabel("time $t$ (s)")
+    fig.suptitle(OVERLAYS[{"e": "errors", "phi": "parameter_errors", "tau": "torques"}[signal]][1])
+    fig.tight_layout()
+    return fig
+
+
 def _overlay(rows: list[Row], signal: str) -> bytes:
-    """One figure, one line per controller: ‖e(t)‖, ‖φ̃(t)‖ (log scale over 12 decades) or ‖τ(t)‖ (over 4)."""
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    colors = [plt.get_cmap("tab20")(i) for i in range(20)]
-    top = 0.0
-    for i, row in enumerate(rows):
-        res = row.result
-        y = {"e": res.e, "phi": res.phi_err, "tau": res.tau}[signal]
-        if y is None or y.shape[-1] == 0:
-            continue
-        norm = np.linalg.norm(y, axis=-1)
-        top = max(top, float(np.max(norm, initial=0.0, where=np.isfinite(norm))))
-        ax.semilogy(res.t, norm, color=colors[(2 * i) % 20 + (2 * i) // 20], linestyle=("-", "--", ":")[i % 3],
-                    label=row.entry.label)
-    if top > 0:
-        ax.set_ylim((1e-4 if signal == "tau" else 1e-12) * top, 3 * top)
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel({"e": "‖e(t)‖ (rad or m)", "phi": "‖φ − φ̂(t)‖", "tau": "‖τ(t)‖ (N·m or N)"}[signal])
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize="small")
-    return _png(fig)
+    """:func:`overlay_figure` as PNG bytes."""
+    return _png(overlay_figure(rows, signal))
 
 
 OVERLAYS = {"errors": ("e", "Tracking error ‖e(t)‖"),
             "parameter_errors": ("phi", "Parameter error ‖φ − φ̂(t)‖ (controllers with an estimate of the true φ)"),
-            "torques": ("tau", "Torque ‖τ(t)‖")}
+            "torques": ("tau", "Control input ‖τ(t)‖")}
 
 
 def comparison_html(base: Scenario, rows: list[Row], skipped: dict[str, str], figures: dict[str, bytes]) -> str:
@@ -241,11 +338,11 @@ def comparison_html(base: Scenario, rows: list[Row], skipped: dict[str, str], fi
 <p>Every controller runs on the same arm ({type(s.plant.model).__name__}, φ = {number_text(s.plant.phi.tolist())}), desired
 trajectory, disturbance, initial state and integrator, {s.t_final:g} s:</p><ul>{setting}</ul>
 <table id="comparison"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>
-<p><small>RMS ‖e‖: root mean square of ‖e(t)‖ over the run; final ‖e‖ at the last instant; peak |τ|: largest joint
-torque; energy ∫τᵀτ dt; final ‖φ̃‖ = ‖φ − φ̂‖ at the end (the constant model error for fixed-estimate laws, ‖φ‖ for PD,
-which uses no model; — for the repetitive law, which learns a signal, not φ); t_conv: the last time
-‖e(t)‖ exceeds 1 % of its maximum (— if it still does at the end); µs/step: wall time of the whole simulation (controller,
-plant and RK4 stages) divided by the number of steps, on this machine.</small></p>
+<p><small>RMS ‖e‖: √(mean over the logged samples of ‖e(t)‖²), the metric <code>rms_error_norm</code>; final ‖e‖
+at the last instant; peak |τ|: largest joint torque; energy ∫τᵀτ dt; final ‖φ̃‖ = ‖φ − φ̂‖ at the end (the constant
+model error for fixed-estimate laws, ‖φ‖ for PD, which uses no model; — for the repetitive law, which learns a signal,
+not φ); t_conv: the last time ‖e(t)‖ exceeds 1 % of its maximum (— if it still does at the end); µs/step: wall time of
+the whole simulation (controller, plant and RK4 stages) divided by the number of steps, on this machine.</small></p>
 {"<p>Not applicable here:</p><ul>" + skip + "</ul>" if skip else ""}
 {images}
 <h2>Gains</h2><p>The book's gains for each law on the two-link arm (or the scenario's own, for the law it uses); they are

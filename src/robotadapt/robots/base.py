@@ -10,7 +10,7 @@ carry exactly the broadcast leading axes. Models are pure: the parameters are ar
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any
+from typing import Any, ClassVar
 
 from .._array import array_namespace, matvec, solve
 
@@ -23,6 +23,9 @@ class RobotModel(ABC):
     #: the model's own parameter values (published, or from its URDF), used when a scenario gives no plant.phi;
     #: None for the textbook arms, whose parameters the scenario always states
     default_phi: Any = None
+    #: True when every method is written with the array API of its inputs, so that JAX can trace it (the compiled
+    #: engine); False for models that call out to compiled code of their own (Pinocchio's C++)
+    traceable: ClassVar[bool] = True
 
     @property
     @abstractmethod

@@ -30,7 +30,7 @@ from dataclasses import dataclass, replace
 from functools import cached_property
 from os import PathLike
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 from xml.etree import ElementTree
 
 import numpy as np
@@ -87,6 +87,7 @@ class PinocchioArm(RobotModel):
     created once per instance. Joint angles of continuous joints are plain angles here (Pinocchio's (cos, sin) inside).
     """
 
+    traceable: ClassVar[bool] = False  # Pinocchio's C++ takes concrete arrays: the numpy engine only
     pin_model: Any
     viscous: bool = False
     coulomb: bool = False

@@ -31,8 +31,8 @@ from ..controllers.base import HasDelayLine, Prepares
 from ..plant.plant import Plant, SinusoidalDisturbance
 from ..trajectories import Reference, SumOfSines
 from ..validation import ConfigError, as_array, as_scalar, as_vector
-from .integrators import RK4, Sampled, SolveIVP, check_plant_step
-from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, diverged, diverged_status, rk4_step, take
+from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
+from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, Ring, Step, diverged, sample, step, stop_status, take
 from .outputs import outputs
 from .result import SimulationResult
 
@@ -251,9 +251,9 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
                           "log; log every more steps")
     controllers = _prepared(runs.controllers, runs.trajectories, dt, t_final)
     loop = ClosedLoop(stack(runs.plants, "plant"), stack(controllers, "controller"), n)
-    line = None
+    line = None  # the delay line, slots (N_slots, N, n): one per run
     if isinstance(loop.controller, HasDelayLine):
-        line = DelayLine(np.stack([c.delay_line(dt, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)],
+        line = Ring.start(np.stack([c.delay_line(dt, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)],
                                    axis=1))
 
     def single(i: int) -> ClosedLoop:
@@ -261,12 +261,16 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
 
     wall = time.perf_counter()
     traj, z0 = stack(runs.trajectories, "trajectory"), np.concatenate([runs.s0, runs.x0], axis=-1)
-    if integrator.backend == "jax":
-        if line is not None:
-            raise ConfigError("simulation.backend", "a controller with a delay line (repetitive) keeps it on the "
-                              "host: use backend = 'numpy'")
-        t, z, n_logged, status = _compiled(loop, traj, z0, dt, n_steps, log_every, max_state)
-    else:
+    traceable = all(p.model.traceable for p in runs.plants) and all(c.model.traceable for c in controllers)
+    compiled = choose_backend(integrator.backend, n_steps * len(controllers), traceable) == "jax"
+    if compiled:
+        try:
+            t, z, n_logged, status = _compiled(loop, single, traj, z0, dt, n_steps, log_every, max_state, line)
+        except ConfigError as exc:  # "auto" steps a law whose code JAX cannot trace (a user's numpy code) with numpy
+            if integrator.backend != "auto" or exc.field != "simulation.backend":
+                raise
+            compiled = False
+    if not compiled:
         t, z, n_logged, status = _integrate(loop, single, traj, z0, dt, n_steps, log_every, max_state, progress, line)
     return BatchResult(t, z, n_logged, tuple(status), runs.plants, controllers, runs.trajectories,
                        time.perf_counter() - wall, dict(info or {}))
@@ -302,46 +306,47 @@ def _stand_in(z: Array, alive: Array) -> Array:
     return xp.where(alive[:, None], z, z[xp.argmax(alive)])
 
 
-def _stopped(single: Callable[[int], ClosedLoop], alive: Array, t: float, z: Array, dt: float,
-             refs: tuple[Reference, ...]) -> dict[int, str]:
+def _stopped(single: Callable[[int], ClosedLoop], alive: Array, t: float, z: Array, line: Ring | None, k: int,
+             dt: float, refs: tuple[Reference, ...]) -> dict[int, str]:
     """The live runs whose controller or plant raises on this step, found run by run, with the reason."""
     out = {}
     for i in np.flatnonzero(alive):
         try:
-            rk4_step(single(int(i)), t, z[i], dt, *(_row(r, int(i)) for r in refs))
+            one = None if line is None else Ring(line.slots[:, i], line.head[i])
+            step(single(int(i)), k, t, z[i], one, dt, *(_row(r, int(i)) for r in refs))
         except (SimulationStop, np.linalg.LinAlgError) as stop:
             out[int(i)] = str(stop)
     return out
 
 
-def _compiled(loop: ClosedLoop, traj: Any, z0: Array, dt: float, n_steps: int, log_every: int,
-              max_state: float) -> tuple[Array, Array, Array, list[str]]:
-    """:func:`_integrate` compiled by JAX (:mod:`robotadapt.compiled`): the same samples and statuses."""
+def _compiled(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any, z0: Array, dt: float, n_steps: int,
+              log_every: int, max_state: float, line: Ring | None) -> tuple[Array, Array, Array, list[str]]:
+    """:func:`_integrate` compiled by JAX (:mod:`robotadapt.sim.compiled`): the same samples and statuses."""
     from .compiled import integrate
 
-    t, z, n_logged, t_bad, why = integrate(loop, lambda times: traj(times[:, None]), z0, dt, n_steps, log_every,
-                                           max_state)
-    status = [diverged_status(float(t_bad[i]), int(why[i]), max_state) for i in range(z0.shape[0])]
+    t, z, n_logged, t_bad, why, z_bad = integrate(loop, lambda times: traj(times[:, None]), z0, dt, n_steps, log_every,
+                                                  max_state, line)
+    status = [stop_status(single(i), float(t_bad[i]), int(why[i]), max_state, z_bad[i]) for i in range(z0.shape[0])]
     T = int(n_logged.max())
     return t[:T], z[:T], n_logged, status
 
 
 def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any, z0: Array, dt: float, n_steps: int,
                log_every: int, max_state: float, progress: bool,
-               line: DelayLine | None) -> tuple[Array, Array, Array, list[str]]:
+               line: Ring | None) -> tuple[Array, Array, Array, list[str]]:
     """Fixed-step RK4 of every run from t = 0; returns the logged (t, z), the number of valid samples per run and the
-    statuses. The per-step math (`rk4_step`, `_advance`, `_stand_in`) writes into no array; the driver around it
-    (logging, statuses, the run-by-run search when a step raises) is host code."""
+    statuses. The per-step math (:func:`~robotadapt.sim.loop.step`, `_advance`, `_stand_in`) writes into no array; the
+    driver around it (logging, statuses, the run-by-run search when a law raises) is host code. A frozen run's log
+    holds the state it stopped in."""
     from tqdm import tqdm
 
     N = z0.shape[0]
     n_log = n_steps // log_every + 1
     z_log = np.empty((n_log,) + z0.shape)
-    z_log[0] = z0
     n_logged = np.full(N, n_log)
     status = ["ok"] * N
     alive = np.ones(N, dtype=bool)
-    z, k_log = z0, 1
+    z, k_log = z0, 0
     m_max = int(max(1, min(CHUNK, _REF_BYTES // (48 * N * z0.shape[1]))))
 
     def stop(why: dict[int, str]) -> None:
@@ -360,32 +365,35 @@ def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any,
             t = k * dt
             refs = (take(ref, 2 * j), take(ref, 2 * j + 1), take(ref, 2 * j + 2))
             z_in = z if alive.all() else _stand_in(z, alive)
-            if line is not None:
-                z_in = line.sample(loop, k, t, z_in, refs[0])
-                if k % log_every == 0:  # the log at t_k holds the state applied at t_k
-                    z_log[k // log_every] = z_in
+            raised: dict[int, str] = {}
+            left = alive
             try:
-                z_new = rk4_step(loop, t, z_in, dt, *refs)
-            except (SimulationStop, np.linalg.LinAlgError):
-                reasons = _stopped(single, alive, t, z_in, dt, refs)
-                if not reasons:
+                s: Step | None = step(loop, k, t, z_in, line, dt, *refs)
+            except (SimulationStop, np.linalg.LinAlgError):  # a law's assumptions failed in some run (numpy)
+                raised = _stopped(single, alive, t, z_in, line, k, dt, refs)
+                if not raised:
                     raise
-                stop({i: f"diverged at t={t:.6g} s: {why}" for i, why in reasons.items()})
-                if not alive.any():
-                    break
-                z_in = _stand_in(z_in, alive)
-                z_new = rk4_step(loop, t, z_in, dt, *refs)
-            z, now = _advance(z, z_new, alive, max_state)
+                left = alive.copy()
+                left[list(raised)] = False
+                s = step(loop, k, t, _stand_in(z_in, left), line, dt, *refs) if left.any() else None
+            if k % log_every == 0:
+                applied = z if s is None else s.applied
+                z_log[k_log], k_log = applied if left.all() else np.where(left[:, None], applied, z), k_log + 1
+            if raised:
+                stop({i: f"diverged at t={t:.6g} s: {why}" for i, why in raised.items()})
+            if s is None:
+                break
+            z, now = _advance(z, s.z, alive, max_state)
             if now.any():
-                stop({int(i): f"diverged at t={t + dt:.6g} s: {diverged(z_new[i], max_state)}"
+                stop({int(i): f"diverged at t={t + dt:.6g} s: {diverged(s.z[i], max_state)}"
                       for i in np.flatnonzero(now)})
-            if (k + 1) % log_every == 0:
-                z_log[k_log] = z
-                k_log += 1
+            line = s.line
             if not alive.any():
                 break
         else:
-            if line is not None and n_steps % log_every == 0:  # the sample at t_final, logged, not integrated
-                z_log[k_log - 1] = line.sample(loop, n_steps, n_steps * dt, _stand_in(z, alive), refs[2])
+            if n_steps % log_every == 0:  # the sample at t_final, logged, not integrated
+                applied = z if line is None else sample(loop, n_steps, n_steps * dt, _stand_in(z, alive), line,
+                                                        refs[2])[0]
+                z_log[k_log] = np.where(alive[:, None], applied, z)
     T = int(n_logged.max())
     return dt * (log_every * np.arange(T)), z_log[:T], n_logged, status

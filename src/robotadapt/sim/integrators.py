@@ -16,21 +16,38 @@ from ..validation import ConfigError, as_scalar
 Array = Any
 
 
-BACKENDS = ("numpy", "jax")
+BACKENDS = ("auto", "numpy", "jax")
+AUTO_MIN_STEPS = 2000  # "auto" compiles a run of at least this many steps (steps × runs for a batch): below it the
+# numpy loop (≈0.3 ms a step on the two-link arm) finishes before a warm program is traced and loaded (≈0.5 s)
+
+
+def check_backend(backend: Any) -> str:
+    """A valid `simulation.backend` name, else a one-line ConfigError naming the field."""
+    if not isinstance(backend, str) or backend not in BACKENDS:
+        raise ConfigError("simulation.backend", f"expected one of {', '.join(BACKENDS)}; got {backend!r}")
+    return backend
+
+
+def choose_backend(backend: str, steps: int, traceable: bool) -> str:
+    """The backend a run takes: "numpy" or "jax" as asked; "auto" compiles (JAX) a loop whose models are traceable
+    when it has at least `AUTO_MIN_STEPS` steps, and steps it with numpy otherwise."""
+    if backend != "auto":
+        return backend
+    return "jax" if traceable and steps >= AUTO_MIN_STEPS else "numpy"
 
 
 @dataclass(frozen=True)
 class RK4:
-    """Classic fixed-step Runge–Kutta 4 with step `dt` (s), stepped by numpy or, with `backend="jax"`, compiled by JAX
-    (:mod:`robotadapt.compiled`; the same step, equal to round-off)."""
+    """Classic fixed-step Runge–Kutta 4 with step `dt` (s), stepped by numpy or compiled by JAX
+    (:mod:`robotadapt.sim.compiled`; the same step, equal to round-off): `backend` "auto" (default: compiled unless the
+    run is short, :func:`choose_backend`), "numpy" or "jax"."""
 
     dt: float = 1e-3
-    backend: str = "numpy"
+    backend: str = "auto"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dt", as_scalar(self.dt, "simulation.dt", positive=True))
-        if not isinstance(self.backend, str) or self.backend not in BACKENDS:
-            raise ConfigError("simulation.backend", f"expected one of {', '.join(BACKENDS)}; got {self.backend!r}")
+        check_backend(self.backend)
 
 
 @dataclass(frozen=True)
@@ -78,10 +95,12 @@ class Sampled:
     control_period: float
     dt: Any = None  # the plant's step (s): a float once constructed
     discretization: str = "euler"
+    backend: str = "auto"  # as for RK4: "auto", "numpy" or "jax"
     substeps: int = field(init=False)
 
     def __post_init__(self) -> None:
         Ts = as_scalar(self.control_period, "simulation.control_period", positive=True)
+        check_backend(self.backend)
         if not isinstance(self.discretization, str) or self.discretization not in DISCRETIZATIONS:
             raise ConfigError("simulation.discretization", f"expected one of {', '.join(DISCRETIZATIONS)}; got "
                               f"{self.discretization!r}")

@@ -40,6 +40,15 @@ class SimulationResult:
     passivity: Array | None = None
     monitors: dict[str, Array] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        """One line: status, samples, time span, joints, parameters and the final |e| (the arrays: `arrays()`)."""
+        t, n = self.t, self.q.shape[-1] if self.q.ndim else 0
+        span = f"t = {t[0]:.4g} … {t[-1]:.4g} s" if t.size else "no samples"
+        names = ", ".join(self.param_names[:4]) + (", …" if len(self.param_names) > 4 else "")
+        final = "[" + ", ".join(f"{v:.3g}" for v in np.abs(self.e[-1])) + "]" if t.size else "—"
+        return (f"SimulationResult(status={self.status!r}, {t.size} samples, {span}, {n} joints, "
+                f"{len(self.param_names)} parameters ({names}), final |e| = {final})")
+
     @property
     def ok(self) -> bool:
         return self.status == "ok"

@@ -1,67 +1,120 @@
-"""The sampled-data loop (:class:`robotadapt.simulation.Sampled`): a digital controller at its ticks t_k = k·Ts, a
-zero-order hold on the torque, the plant integrated between ticks.
+"""The sampled-data loop (:class:`robotadapt.sim.Sampled`): a digital controller at its ticks t_k = k·Ts, a zero-order
+hold on the torque, the plant integrated between ticks.
 
-One tick k:
+One tick is one pure function, :class:`Tick`: `carry_{k+1}, record_k, verdict_k = tick(carry_k, inputs_k)`, written
+against the array API of its inputs (no writes into arrays, no branch on a value), so that the numpy driver here loops
+over it and the compiled driver (:mod:`robotadapt.sim.compiled_sampled`) scans over it. Everything that changes from
+tick to tick is in the carry (:class:`Carry`): the plant's state s, the controller's x, the sensor's memory, the
+actuator's held torque and commands in flight, and the delay line of the repetitive law. What comes from outside is an
+input (:class:`Inputs`): k, t_k, the reference at t_k and the tick's noise draws (numpy draws them from the run's seed
+ahead, a block of ticks at a time, for both drivers). Tick k:
 
-1. measure (q_m, q̇_m, q̈_m) from the plant's state through its sensor (:mod:`robotadapt.sensors`; exact samples
+1. measure (q_m, q̇_m, q̈_m) from the plant's state through its sensor (:mod:`robotadapt.plant.sensors`; exact samples
    without one);
-2. a delay line (the repetitive law, N = T/Ts ticks per period) is read and written with the measured signals;
-3. the controller gives τ_k and ẋ_k from (t_k, x_k, q_m, q̇_m, ref(t_k));
-4. the actuator turns τ_k into the applied u_k (delay, saturation, rate limit; :mod:`robotadapt.actuators`);
-5. every `log_every` ticks: t_k, the true state s_k, x_k, u_k, τ_k, q_m, q̇_m are logged;
+2. a delay line (the repetitive law, N = T/Ts ticks per period) is read at slot k mod N and written with what the law
+   returns (a new array: :func:`robotadapt.sim.loop.ring_write`);
+3. the controller gives τ_k and ẋ_k from (t_k, x_k, q_m, q̇_m, ref(t_k)) (with q̈_m for a law that needs it); where a
+   guarded law's assumption fails (HasGuard: raised on numpy arrays, read from its guard on traced ones) the run stops
+   at t_k, this tick unlogged;
+4. the actuator turns τ_k into the applied u_k (delay, saturation, rate limit; :mod:`robotadapt.plant.actuators`);
+5. the record of the tick: the true state s_k, x_k, u_k, τ_k, q_m, q̇_m (the drivers keep every `log_every`-th);
 6. the plant: `substeps` RK4 steps of dt = Ts/substeps of ds/dt = f(t, s, u_k); the controller's state: x_{k+1} by the
-   discrete rule ("euler" or "hold"), projected;
-7. the divergence guard on (s_{k+1}, x_{k+1}).
+   discrete rule ("euler" or "hold"), projected (a guard failing inside "hold" stops the run at t_k, this tick logged);
+7. the divergence guard on (s_{k+1}, x_{k+1}): the run stops at t_k + Ts on a non-finite state or one beyond
+   `max_state` (:class:`Verdict`, codes of :data:`robotadapt.sim.loop.REASONS` and `GUARD`).
 
-The last tick (t = t_final) is measured, computed and logged, not integrated.
+The last tick (t = t_final) is measured, computed and logged, not integrated. On numpy arrays a law raises
+:class:`SimulationStop` itself, and the numpy driver stops the run at its tick (unlogged if raised at the sample).
 """
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from .._array import array_namespace
 from ..controllers.base import HasProjection, SimulationStop
 from ..plant.actuators import Actuator
 from ..plant.sensors import Sensor
-from .loop import CHUNK, diverged, take
+from ..trajectories import Reference
+from .compiled import jax_module
+from .loop import CHUNK, GUARD, ClosedLoop, diverged_status, ring_write, take
 
 if TYPE_CHECKING:
-    from ..plant.plant import Plant
-    from ..trajectories import Reference, Trajectory
+    from ..trajectories import Trajectory
     from .integrators import Sampled
-    from .loop import ClosedLoop, DelayLine
+    from .loop import DelayLine
 
 Array = Any
-Rate = Callable[[Array], Array]
+UNROLL = 4  # plant sub-steps (and "hold" sub-steps) written out in the compiled tick; more: a loop inside it
 
 
-def _controller(loop: ClosedLoop, t: float, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference, actuator: Actuator,
-                pending: Any, Ts: float) -> tuple[Array, Array, Any, Array, Rate]:
-    """τ_k, the applied u_k and the actuator's next state, ẋ_k, and the map x ↦ ẋ with every other input (u_k too)
-    held at its sample. A law that filters the torque (FiltersTorque) filters u_k."""
-    ctrl: Any = loop.controller
-    if loop.needs_acceleration:
-        def rate(x: Array) -> Array:
-            return ctrl.update(t, x, q, dq, ddq, ref)
+class Carry(NamedTuple):
+    """What one tick hands the next, arrays only (a JAX pytree as it stands)."""
 
-        tau = ctrl.torque(t, x, q, dq, ref)
-        u, pending = actuator.apply(pending, tau, Ts)
-        return tau, u, pending, rate(x), rate
-
-    def held(x: Array) -> Array:
-        tau, dx = ctrl(t, x, q, dq, ref)
-        return ctrl.applied(dx, tau, u) if loop.filters_torque else dx
-
-    tau, dx = ctrl(t, x, q, dq, ref)
-    u, pending = actuator.apply(pending, tau, Ts)
-    return tau, u, pending, ctrl.applied(dx, tau, u) if loop.filters_torque else dx, held
+    s: Array  # the plant's state (m,)
+    x: Array  # the controller's state
+    sensor: tuple[Array, Array, Array, Array]  # the measurement path's memory (Sensor.start)
+    actuator: tuple[Array, Array]  # u_{k−1} and the commands in flight (d, n) (Actuator.start)
+    line: Array  # the delay line (N, ...) of a law with one; shape (0,) without
 
 
-def _rk4(f: Callable[[float, Array], Array], t: float, y: Array, h: float) -> Array:
+class Inputs(NamedTuple):
+    """What tick k takes from outside (the drivers may pass a plain tuple in this order)."""
+
+    k: Array  # the tick's index
+    t: Array  # t_k = k Ts
+    ref: Reference  # q_des, q̇_des, q̈_des at t_k
+    noise: Array  # the tick's standard normal draws (2, n) (Sensor.noise)
+
+
+class Sample(NamedTuple):
+    """The tick's measurements and the controller's outputs, what the hold and the record need."""
+
+    q_m: Array
+    dq_m: Array
+    ddq_m: Array
+    tau: Array  # commanded
+    u: Array  # applied
+    dx: Array
+    ok: Array | None  # a guarded law's guard at the sample, traced (None: no guard, or numpy, where the law raises)
+
+
+class Record(NamedTuple):
+    """What a logged tick keeps (the names of the result's signals)."""
+
+    z: Array  # [s_k, x_k]
+    tau: Array  # the applied u_k
+    tau_commanded: Array
+    q_measured: Array
+    dq_measured: Array
+
+
+class Verdict(NamedTuple):
+    """How tick k ended (None where the law has no guard)."""
+
+    held: Array | None  # the guard held at the sample; if not, the run stops at t_k and the tick is not logged
+    why: Array  # after the hold: 0 go on, 1 or 2 (REASONS) stop at t_k + Ts, GUARD stop at t_k ("hold" sub-step)
+    q_bad: Array | None  # where a guard failed: the q and x its law was evaluated at (Tick.status)
+    x_bad: Array | None
+
+
+def repeat(xp: Any, count: int, body: Callable[[Any, Any], Any], init: Any) -> Any:
+    """body(count − 1, … body(1, body(0, init))): a Python loop for numpy and short loops, `lax.fori_loop` for longer
+    ones on JAX arrays (the same arithmetic, a smaller program)."""
+    if xp is np or count <= UNROLL:
+        for i in range(count):
+            init = body(i, init)
+        return init
+    return jax_module().lax.fori_loop(0, count, body, init)
+
+
+def rk4(f: Callable[[Any, Array], Array], t: Any, y: Array, h: float) -> Array:
+    """One classic RK4 step of dy/dt = f(t, y)."""
     k1 = f(t, y)
     k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
     k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
@@ -69,74 +122,215 @@ def _rk4(f: Callable[[float, Array], Array], t: float, y: Array, h: float) -> Ar
     return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
-def _next_state(opts: Sampled, x: Array, dx: Array, rate: Rate, project: Callable[[Array], Array] | None) -> Array:
-    """x_{k+1} by the discrete rule, projected."""
-    if opts.discretization == "euler":
-        x = x + opts.control_period * dx
-        return x if project is None else project(x)
-    for _ in range(opts.substeps):
-        x = _rk4(lambda _t, y: rate(y), 0.0, x, opts.dt)
-        x = x if project is None else project(x)
-    return x
+def guarded_rk4(g: Callable[[Array], tuple[Array, Array]], y: Array, h: float) -> tuple[Array, Array, Array]:
+    """:func:`rk4` of dy/dt = g(y)[0], g also giving a guard: (the step, whether it held in all four stages, the first
+    stage state where it did not)."""
+    xp = array_namespace(y)
+    k1, ok1 = g(y)
+    y2 = y + 0.5 * h * k1
+    k2, ok2 = g(y2)
+    y3 = y + 0.5 * h * k2
+    k3, ok3 = g(y3)
+    y4 = y + h * k3
+    k4, ok4 = g(y4)
+    bad = xp.where(ok1, xp.where(ok2, xp.where(ok3, y4, y3), y2), y)
+    return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4), ok1 & ok2 & ok3 & ok4, bad
 
 
-def _hold(plant: Plant, t: float, s: Array, u: Array, h: float, substeps: int) -> Array:
-    """The plant's state one control period on, under the held torque u: `substeps` RK4 steps of h."""
-    for i in range(substeps):
-        s = _rk4(lambda t, s: plant.derivative(t, s, u), t + i * h, s, h)
-    return s
+@dataclass(frozen=True, eq=False)
+class Tick:
+    """One control tick of the sampled-data loop as a pure function of (carry, inputs) (module docstring). Holds
+    constants only: the closed loop, the sampling options, the sensor and actuator (defaults: exact, none), the
+    divergence bound and whether the law has a delay line."""
+
+    loop: ClosedLoop
+    opts: Sampled
+    sensor: Sensor
+    actuator: Actuator
+    max_state: float
+    has_line: bool
+    projects: bool = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "projects", isinstance(self.loop.controller, HasProjection))
+
+    def start(self, z0: Array, line: Array | None) -> Carry:
+        """The carry before tick 0: z0 = [s0, x0] and the delay line's initial contents (None: no line)."""
+        n, m, Ts = self.loop.n, self.loop.m, self.opts.control_period
+        s, x = np.asarray(z0[:m], dtype=float), np.asarray(z0[m:], dtype=float)
+        buffer = np.zeros(0) if line is None else np.array(line, dtype=float)
+        return Carry(s, x, self.sensor.start(s[:n], s[n : 2 * n], Ts), self.actuator.start(), buffer)
+
+    def __call__(self, carry: Carry, inputs: Any) -> tuple[Carry, Record, Verdict]:
+        """(carry_{k+1}, record_k, verdict_k): steps 1–7 of the module docstring."""
+        mid, sample = self.sample(carry, inputs)
+        new, why, x_bad = self.advance(mid, inputs, sample)
+        if sample.ok is None:
+            return new, self.record(mid, sample), Verdict(None, why, None, None)
+        x_bad = array_namespace(mid.x).where(sample.ok, x_bad, mid.x)
+        return new, self.record(mid, sample), Verdict(sample.ok, why, sample.q_m, x_bad)
+
+    def sample(self, carry: Carry, inputs: Any) -> tuple[Carry, Sample]:
+        """Steps 1–4: the carry with the sensor's, the delay line's and the actuator's memory advanced and x_k read
+        from the line, and the tick's samples."""
+        k, t, ref, noise = inputs
+        n, Ts, ctrl = self.loop.n, self.opts.control_period, self.loop.controller
+        s, x, line = carry.s, carry.x, carry.line
+        (q_m, dq_m, ddq_m), sensor = self.sensor.measure(carry.sensor, s[:n], s[n : 2 * n], noise, Ts)
+        if self.has_line:
+            slot = k % line.shape[0]
+            x, store = ctrl.sample(t, x, q_m, dq_m, ref, array_namespace(line).asarray(line[slot], copy=True))
+            line = ring_write(line, slot, store)
+        ok = ctrl.guard(t, x, q_m, dq_m, ref) if self.guarded(s) else None
+        if self.loop.needs_acceleration:
+            tau = ctrl.torque(t, x, q_m, dq_m, ref)
+            u, actuator = self.actuator.apply(carry.actuator, tau, Ts)
+            dx = ctrl.update(t, x, q_m, dq_m, ddq_m, ref)
+        else:
+            tau, dx = ctrl(t, x, q_m, dq_m, ref)
+            u, actuator = self.actuator.apply(carry.actuator, tau, Ts)
+            if self.loop.filters_torque:
+                dx = ctrl.applied(dx, tau, u)
+        return Carry(s, x, sensor, actuator, line), Sample(q_m, dq_m, ddq_m, tau, u, dx, ok)
+
+    def record(self, carry: Carry, sample: Sample) -> Record:
+        """Step 5, from the carry `sample` returned."""
+        z = array_namespace(carry.s, carry.x).concatenate([carry.s, carry.x])
+        return Record(z, sample.u, sample.tau, sample.q_m, sample.dq_m)
+
+    def advance(self, carry: Carry, inputs: Any, sample: Sample) -> tuple[Carry, Array, Array | None]:
+        """Steps 6–7: the carry one tick on, the code why the run stops there (0: it goes on) and, for a guarded law,
+        the state x its guard failed at under "hold" (x_k otherwise; None without a guard read)."""
+        t, ref = inputs[1], inputs[2]
+        x, ok, x_bad = self.next_state(t, ref, carry.x, sample)
+        s = self.hold(t, carry.s, sample.u)
+        xp = array_namespace(s, x)
+        z = xp.concatenate([s, x])
+        why = xp.where(xp.all(xp.isfinite(z)), xp.where(xp.max(xp.abs(z)) > self.max_state, 2, 0), 1)
+        if ok is not None:
+            why = xp.where(ok, why, GUARD)
+        elif sample.ok is not None:
+            x_bad = carry.x
+        return carry._replace(s=s, x=x), why, x_bad
+
+    def guarded(self, s: Array) -> bool:
+        """Whether the tick reads the law's guard (HasGuard): on traced arrays; on numpy ones the law raises itself."""
+        return self.loop.guarded and array_namespace(s) is not np
+
+    def project(self, x: Array) -> Array:
+        return self.loop.controller.project(x) if self.projects else x
+
+    def next_state(self, t: Array, ref: Reference, x: Array, sample: Sample) -> tuple[Array, Array | None, Array | None]:
+        """x_{k+1} by the discrete rule, projected (each sub-step of "hold", where ẋ = f(x) has every other input held
+        at its sample, u_k too; a law that filters the torque filters u_k); for a guarded law under "hold" (traced),
+        whether its guard held in every stage and the first stage state where it did not (None otherwise)."""
+        opts, ctrl, q, dq, ddq = self.opts, self.loop.controller, sample.q_m, sample.dq_m, sample.ddq_m
+        if opts.discretization == "euler":
+            return self.project(x + opts.control_period * sample.dx), None, None
+
+        def rate(_t: Any, y: Array) -> Array:
+            if self.loop.needs_acceleration:
+                return ctrl.update(t, y, q, dq, ddq, ref)
+            tau, dy = ctrl(t, y, q, dq, ref)
+            return ctrl.applied(dy, tau, sample.u) if self.loop.filters_torque else dy
+
+        xp = array_namespace(x)
+        if sample.ok is None:
+            return repeat(xp, opts.substeps, lambda _i, y: self.project(rk4(rate, 0.0, y, opts.dt)), x), None, None
+
+        def guarded(_i: Any, state: tuple[Array, Array, Array]) -> tuple[Array, Array, Array]:
+            y, ok, bad = state
+            y, ok_i, bad_i = guarded_rk4(lambda y: (rate(0.0, y), ctrl.guard(t, y, q, dq, ref)), y, opts.dt)
+            return self.project(y), ok & ok_i, xp.where(ok, bad_i, bad)
+
+        return repeat(xp, opts.substeps, guarded, (x, xp.asarray(True), x))
+
+    def hold(self, t: Array, s: Array, u: Array) -> Array:
+        """The plant's state one control period on, under the held torque u: `substeps` RK4 steps of dt."""
+        plant, n, h = self.loop.plant, self.loop.n, self.opts.dt
+
+        def f(t: Array, s: Array) -> Array:
+            if self.loop.rigid:  # the state [q, q̇]: the plant's acceleration, as in the continuous loop
+                return array_namespace(s).concatenate([s[n:], plant.acceleration(t, s[:n], s[n:], u)])
+            return plant.derivative(t, s, u)
+
+        return repeat(array_namespace(s), self.opts.substeps, lambda i, s: rk4(f, t + i * h, s, h), s)
+
+    def status(self, t: float, why: int, q_bad: Array, x_bad: Array) -> str:
+        """The status of a run stopped at `t` for the code `why` (a guard: the law's reason at (q_bad, x_bad))."""
+        if why == GUARD:
+            return f"diverged at t={t:.6g} s: {self.loop.controller.stop_reason(np.asarray(q_bad), np.asarray(x_bad))}"
+        return diverged_status(t, why, self.max_state)
+
+    def blank(self, carry: Carry) -> Record:
+        """A record of zeros shaped like this tick's (what a compiled block starts from)."""
+        n = self.loop.n
+        return Record(np.zeros(carry.s.size + carry.x.size), *(np.zeros(n) for _ in range(4)))
+
+    def logged(self, records: Record) -> dict[str, Array]:
+        """The result's signals from the stacked records: `tau` (applied), and `tau_commanded` with an actuator,
+        `q_measured`, `dq_measured` with a sensor."""
+        plant = self.loop.plant
+        keep = ["tau"] + ["tau_commanded"] * (plant.actuator is not None) + ["q_measured", "dq_measured"] * (
+            plant.sensor is not None)
+        return {name: getattr(records, name) for name in keep}
 
 
 def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: int, log_every: int,
-              max_state: float, progress: bool,
-              line: DelayLine | None) -> tuple[Array, Array, str, dict[str, Array]]:
-    """Ticks 0 … `n_ticks` from t = 0; returns the logged (t, z), the status and the logged signals (`tau` applied,
-    and `tau_commanded` with an actuator, `q_measured`, `dq_measured` with a sensor)."""
+              max_state: float, progress: bool, line: DelayLine | None,
+              backend: str = "numpy") -> tuple[Array, Array, str, dict[str, Array]]:
+    """Ticks 0 … `n_ticks` from t = 0, stepped by numpy (`backend` "numpy") or compiled by JAX ("jax"; the same tick,
+    equal to round-off; `progress` is not shown); returns the logged (t, z), the status and the logged signals
+    (:meth:`Tick.logged`). `line` gives the delay line's initial contents; it is not written."""
+    n = loop.n
+    tick = Tick(loop, opts, loop.plant.sensor or Sensor(n), loop.plant.actuator or Actuator(n), max_state,
+                line is not None)
+    carry = tick.start(z0, None if line is None else line.buffer)
+    if backend == "jax":
+        from .compiled_sampled import integrate as compiled
+
+        t, records, status = compiled(tick, carry, traj, n_ticks, log_every)
+        logged = Record(*records)
+    else:
+        t, logged, status = _run(tick, carry, traj, n_ticks, log_every, progress)
+    return t, logged.z, status, tick.logged(logged)
+
+
+def _run(tick: Tick, carry: Carry, traj: Trajectory, n_ticks: int, log_every: int,
+         progress: bool) -> tuple[Array, Record, str]:
+    """The numpy driver: the tick in a Python loop, the reference and the noise drawn a block of ticks at a time."""
     from tqdm import tqdm
 
-    plant, n, m = loop.plant, loop.n, loop.m
-    Ts, h = opts.control_period, opts.dt
-    measure = (plant.sensor or Sensor(n)).start(z0[:n], z0[n : 2 * n], Ts)
-    actuator = plant.actuator or Actuator(n)
-    pending = actuator.start()
-    project = loop.controller.project if isinstance(loop.controller, HasProjection) else None
+    Ts = tick.opts.control_period
+    rng = tick.sensor.generator()
     n_log = n_ticks // log_every + 1
-    t_log = np.empty(n_log)
-    logs = {name: np.empty((n_log, width)) for name, width in
-            (("z", z0.size), ("tau", n), ("tau_commanded", n), ("q_measured", n), ("dq_measured", n))}
-    s, x, k_log, status, start = z0[:m], z0[m:], 0, "ok", 0
+    logs = Record(*(np.empty((n_log, width)) for width in (carry.s.size + carry.x.size,) + (tick.loop.n,) * 4))
+    k_log, status, start = 0, "ok", 0
     with tqdm(total=n_ticks + 1, delay=1.0, disable=not progress, unit="tick", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
         while status == "ok" and start <= n_ticks:
             count = min(CHUNK, n_ticks + 1 - start)
             ref = traj(Ts * (start + np.arange(count)))
+            noise = tick.sensor.noise(rng, count)
             for k in range(start, start + count):
-                t, r = k * Ts, take(ref, k - start)
-                q_m, dq_m, ddq_m = measure(s[:n], s[n : 2 * n])
+                t = k * Ts
+                inputs = Inputs(k, t, take(ref, k - start), noise[k - start])
                 try:
-                    if line is not None:
-                        x = line.advance(loop.controller, k, t, x, q_m, dq_m, r)
-                    tau, u, pending, dx, rate = _controller(loop, t, x, q_m, dq_m, ddq_m, r, actuator, pending, Ts)
+                    mid, sample = tick.sample(carry, inputs)  # a guarded law raises here on numpy arrays
                     if k % log_every == 0:
-                        t_log[k_log] = t
-                        for name, value in (("z", np.concatenate([s, x])), ("tau", u), ("tau_commanded", tau),
-                                            ("q_measured", q_m), ("dq_measured", dq_m)):
-                            logs[name][k_log] = value
+                        for log, value in zip(logs, tick.record(mid, sample), strict=True):
+                            log[k_log] = value
                         k_log += 1
                     if k == n_ticks:
                         break
-                    x_new = _next_state(opts, x, dx, rate, project)
-                except SimulationStop as stop:
+                    new, why, x_bad = tick.advance(mid, inputs, sample)
+                except SimulationStop as stop:  # a guarded law (or one that raises of its own) on numpy arrays
                     status = f"diverged at t={t:.6g} s: {stop}"
                     break
-                s_new = _hold(plant, t, s, u, h, opts.substeps)
-                reason = diverged(np.concatenate([s_new, x_new]), max_state)
-                if reason is not None:
-                    status = f"diverged at t={t + Ts:.6g} s: {reason}"
+                if why:
+                    status = tick.status(t if why == GUARD else t + Ts, int(why), sample.q_m, x_bad)
                     break
-                s, x = s_new, x_new
+                carry = new
             start += count
             bar.update(count)
-    keep = ["tau"] + ["tau_commanded"] * (plant.actuator is not None) + ["q_measured", "dq_measured"] * (
-        plant.sensor is not None)
-    return t_log[:k_log], logs["z"][:k_log], status, {name: logs[name][:k_log] for name in keep}
+    return Ts * (log_every * np.arange(k_log)), Record(*(log[:k_log] for log in logs)), status

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import sys
 import time
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -20,8 +21,8 @@ from ..controllers.base import Controller, HasDelayLine, NeedsAcceleration, Prep
 from ..plant.plant import Plant, same_model
 from ..trajectories import Trajectory
 from ..validation import ConfigError, as_scalar, as_vector
-from .integrators import RK4, Sampled, SolveIVP, check_plant_step
-from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, diverged, diverged_status, rk4_step, take
+from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
+from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, Ring, diverged, sample, step, stop_status, take
 from .outputs import outputs
 from .result import SimulationResult
 
@@ -29,51 +30,51 @@ Array = Any
 
 
 def _rk4(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int, max_state: float,
-         progress: bool, line: DelayLine | None) -> tuple[Array, Array, str]:
-    """Fixed-step RK4 from t = 0; returns logged (t, z) and the status."""
+         progress: bool, line: Ring | None) -> tuple[Array, Array, str]:
+    """Fixed-step RK4 from t = 0 (:func:`~robotadapt.sim.loop.step` in a Python loop); returns logged (t, z) and the
+    status. The log at t_k holds the state applied over step k (with a delay line, x as read from it); the last sample,
+    at t_final, is logged, not integrated."""
     from tqdm import tqdm
 
-    n_log = n_steps // log_every + 1
-    t_log = np.empty(n_log)
-    z_log = np.empty((n_log,) + z0.shape)
-    t_log[0], z_log[0] = 0.0, z0
-    z, k_log = z0, 1
+    z_log = np.empty((n_steps // log_every + 1,) + z0.shape)
+    z, k_log, status = z0, 0, "ok"
     with tqdm(total=n_steps, delay=1.0, disable=not progress, unit="step", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
         for start in range(0, n_steps, CHUNK):
             m = min(CHUNK, n_steps - start)
             ref = traj(dt * (start + 0.5 * np.arange(2 * m + 1)))
             for j in range(m):
-                t = (start + j) * dt
-                r0 = take(ref, 2 * j)
+                k, t = start + j, (start + j) * dt
                 try:
-                    if line is not None:
-                        z = line.sample(loop, start + j, t, z, r0)
-                        if (start + j) % log_every == 0:  # the log at t_k holds the state applied at t_k
-                            z_log[(start + j) // log_every] = z
-                    z_new = rk4_step(loop, t, z, dt, r0, take(ref, 2 * j + 1), take(ref, 2 * j + 2))
-                except SimulationStop as stop:
-                    return t_log[:k_log], z_log[:k_log], f"diverged at t={t:.6g} s: {stop}"
-                reason = diverged(z_new, max_state)
+                    s = step(loop, k, t, z, line, dt, take(ref, 2 * j), take(ref, 2 * j + 1), take(ref, 2 * j + 2))
+                except SimulationStop as stop:  # the law's assumptions failed (a guarded law, on numpy)
+                    status, s = f"diverged at t={t:.6g} s: {stop}", None
+                if k % log_every == 0:
+                    z_log[k_log], k_log = z if s is None else s.applied, k_log + 1
+                if s is None:
+                    break
+                reason = diverged(s.z, max_state)
                 if reason is not None:
-                    return t_log[:k_log], z_log[:k_log], f"diverged at t={t + dt:.6g} s: {reason}"
-                z = z_new
-                if (start + j + 1) % log_every == 0:
-                    t_log[k_log], z_log[k_log] = (start + j + 1) * dt, z
-                    k_log += 1
+                    status = f"diverged at t={t + dt:.6g} s: {reason}"
+                    break
+                z, line = s.z, s.line
             bar.update(m)
-    if line is not None and n_steps % log_every == 0:  # the sample at t_final, logged, not integrated
-        z_log[k_log - 1] = line.sample(loop, n_steps, n_steps * dt, z, take(ref, 2 * m))
-    return t_log[:k_log], z_log[:k_log], "ok"
+            if status != "ok":
+                break
+        else:
+            if n_steps % log_every == 0:  # the sample at t_final, logged, not integrated
+                z_log[k_log], k_log = z if line is None else sample(loop, n_steps, n_steps * dt, z, line,
+                                                                    take(ref, 2 * m))[0], k_log + 1
+    return dt * (log_every * np.arange(k_log)), z_log[:k_log], status
 
 
 def _rk4_compiled(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int,
-                  max_state: float) -> tuple[Array, Array, str]:
+                  max_state: float, line: Ring | None) -> tuple[Array, Array, str]:
     """:func:`_rk4` compiled by JAX: the same logged samples and status."""
     from .compiled import integrate
 
-    t, z, n_logged, t_bad, why = integrate(loop, traj, z0, dt, n_steps, log_every, max_state)
-    return t[:n_logged], z[:n_logged], diverged_status(float(t_bad), int(why), max_state)
+    t, z, n_logged, t_bad, why, z_bad = integrate(loop, traj, z0, dt, n_steps, log_every, max_state, line)
+    return t[:n_logged], z[:n_logged], stop_status(loop, float(t_bad), int(why), max_state, z_bad)
 
 
 def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
@@ -145,10 +146,10 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     plant.check_state(q0)
     sampled = isinstance(integrator, Sampled)
     check_plant_step(plant, integrator)
-    step = integrator.control_period if isinstance(integrator, Sampled) else integrator.dt
+    h = integrator.control_period if isinstance(integrator, Sampled) else integrator.dt
     if isinstance(controller, Prepares):
         try:
-            controller = controller.prepare(trajectory, step, t_final)
+            controller = controller.prepare(trajectory, h, t_final)
         except ConfigError as exc:  # sampled, the controller's step is the control period
             if not sampled or exc.field != "simulation.dt":
                 raise
@@ -158,7 +159,7 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     if isinstance(controller, HasDelayLine):
         if isinstance(integrator, SolveIVP):
             raise ConfigError("simulation.method", "a controller with a delay line (repetitive) needs method = 'rk4'")
-        line = DelayLine(np.array(controller.delay_line(step, q0, dq0), dtype=float))
+        line = DelayLine(np.array(controller.delay_line(h, q0, dq0), dtype=float))
     loop = ClosedLoop(plant, controller, n)
     z0 = np.concatenate([plant.initial_state(q0, dq0), x0])
     info, effects = dict(info or {}), plant.describe()
@@ -172,26 +173,35 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     if isinstance(integrator, SolveIVP):
         t, z, status = _solve_ivp(loop, trajectory, z0, integrator, t_final, max_state)
     else:
-        n_steps = int(np.ceil(t_final / step - 1e-9))
+        n_steps = int(np.ceil(t_final / h - 1e-9))
         width = z0.size + (4 * n if sampled else 0)
         log_bytes = 8.0 * (n_steps // log_every + 1) * width
         if log_bytes > MAX_LOG_BYTES:
             name = "simulation.control_period" if sampled else "simulation.dt"
             raise ConfigError(name, f"{n_steps:.3g} steps would keep a {log_bytes / 1e9:.3g} GB log; "
                               f"use a larger {name.split('.')[1]} or simulation.log_every")
-        if isinstance(integrator, Sampled):
-            from .sampled import integrate
+        backend = choose_backend(integrator.backend, n_steps, plant.model.traceable and controller.model.traceable)
 
+        def run(backend: str) -> tuple[Array, Array, str, dict[str, Array] | None]:
+            if isinstance(integrator, Sampled):
+                from .sampled import integrate
+
+                return integrate(loop, trajectory, z0, integrator, n_steps, log_every, max_state, progress, line,
+                                 backend=backend)
+            step = _rk4_compiled if backend == "jax" else partial(_rk4, progress=progress)
+            return (*step(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state,
+                          line=None if line is None else Ring.start(line.buffer)), None)
+
+        if isinstance(integrator, Sampled):
             info["sampling"] = integrator.describe()
-            t, z, status, logged = integrate(loop, trajectory, z0, integrator, n_steps, log_every, max_state,
-                                             progress, line)
-        elif integrator.backend == "jax":
-            if line is not None:
-                raise ConfigError("simulation.backend", "a controller with a delay line (repetitive) keeps it on the "
-                                  "host: use backend = 'numpy'")
-            t, z, status = _rk4_compiled(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state)
-        else:
-            t, z, status = _rk4(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress, line)
+        try:
+            t, z, status, logged = run(backend)
+        except ConfigError as exc:  # "auto" steps a law whose code JAX cannot trace (a user's numpy code) with numpy
+            if integrator.backend != "auto" or exc.field != "simulation.backend":
+                raise
+            backend = "numpy"
+            t, z, status, logged = run(backend)
+        info["backend"] = backend
     wall = time.perf_counter() - wall
     with np.errstate(all="ignore"):  # a diverged run's last samples may overflow in the recomputed outputs
         return outputs(loop, trajectory, t, z, status, wall, info, logged)

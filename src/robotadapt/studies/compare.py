@@ -16,7 +16,7 @@ from ..sim.integrators import RK4
 from ..sim.result import SimulationResult
 from ..validation import ConfigError
 from .scenarios import Scenario
-from .scenarios.build import setup
+from .scenarios.build import canonical_kind, setup
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,10 +114,12 @@ class Row:
 
 
 def _kinds(section: Any) -> tuple[Any, ...]:
-    """A controller section's kind and the kinds of its servo, law and base: what identifies a lineup entry."""
+    """A controller section's kind and the kinds of its servo, law and base (aliases by their registry name): what
+    identifies a lineup entry."""
     if not isinstance(section, dict):
         return (section,)
-    return (section.get("kind"),) + tuple(_kinds(section[k]) for k in ("servo", "law", "base") if k in section)
+    return ((canonical_kind("controller", section.get("kind")),)
+            + tuple(_kinds(section[k]) for k in ("servo", "law", "base") if k in section))
 
 
 def _fill(section: Any, phi: np.ndarray) -> Any:
@@ -185,7 +187,7 @@ def _row(entry: Entry, progress: bool) -> Row:
     e_norm = np.linalg.norm(res.e, axis=-1)
     summary = {
         "controller": entry.name, "label": entry.label, "source": entry.source, "status": res.status,
-        "rms_error": float(np.sqrt(np.mean(e_norm**2))), "final_error": float(e_norm[-1]),
+        "rms_error_norm": m["rms_error_norm"], "final_error": float(e_norm[-1]),
         "max_error": float(e_norm.max()), "peak_torque": float(np.max(m["max_abs_torque"])),
         "control_energy": m["control_energy"], "final_phi_error": m.get("final_phi_error"),
         "convergence_time": convergence_time(res.t, res.e), "us_per_step": 1e6 * res.wall_time / steps,

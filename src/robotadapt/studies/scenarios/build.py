@@ -20,7 +20,7 @@ from ...plant.plant import Plant, sinusoidal_disturbance
 from ...plant.sensors import Sensor
 from ...plant.unmodeled import ElasticJoint, Payload
 from ...robots import RobotModel
-from ...sim.integrators import RK4, Sampled, SolveIVP
+from ...sim.integrators import RK4, Sampled, SolveIVP, check_backend
 from ...validation import ConfigError, as_scalar, as_vector, check_names
 
 # kind → "module:attribute" (imported on use, so optional parts cost nothing until named) and what the constructor
@@ -30,11 +30,11 @@ REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
         "one_link": ("robots.one_link:OneLinkArm", None),
         "two_link": ("robots.two_link:TwoLinkArm", None),
         "polar": ("robots.polar:PolarArm", None),
-        "planar": ("robots.symbolic:planar_arm", None),
-        "dh": ("robots.symbolic:from_dh_table", None),
-        "puma560": ("robots.symbolic:puma560", None),
-        "urdf": ("robots.pinocchio:PinocchioArm.from_urdf", None),
-        "example_robot": ("robots.pinocchio:PinocchioArm.example", None),
+        "planar": ("robots.catalog:planar", None),
+        "dh": ("robots.catalog:dh_arm", None),
+        "puma560": ("robots.catalog:puma560_arm", None),
+        "urdf": ("robots.catalog:urdf_arm", None),
+        "example_robot": ("robots.catalog:example_arm", None),
     },
     "trajectory": {
         "sinusoid": ("trajectories:sinusoid", "n"),
@@ -66,6 +66,8 @@ REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
         "sigma": ("adaptation:SwitchingSigma", "p"),
     },
 }
+# other names of a kind: the same constructor (the book calls Slotine–Li's law the inertia-related one, Table 6.3.1)
+ALIASES: dict[str, dict[str, str]] = {"controller": {"inertia_related": "slotine_li"}}
 # keys whose value is itself a table with a kind, and the registry it names
 NESTED = {"servo": "servo", "law": "law", "base": "controller"}
 # the field prefix each registry's constructors write in their errors (rewritten to the nested path when nested)
@@ -115,15 +117,21 @@ def _signature(ctor: Callable[..., Any], first: str | None) -> dict[str, bool]:
     return names
 
 
+def canonical_kind(registry: str, kind: Any) -> Any:
+    """The registry's own name of `kind` (`inertia_related` → `slotine_li`); any other value as it is."""
+    return ALIASES.get(registry, {}).get(kind, kind) if isinstance(kind, str) else kind
+
+
 def build(registry: str, section: Any, name: str, model: RobotModel | None = None) -> Any:
     """Call the constructor that `section['kind']` names in `REGISTRY[registry]` with the section's other keys; nested
     tables (servo, law, base) are built first. `phi_hat0` defaults to zeros."""
     table = REGISTRY[registry]
     if not isinstance(section, dict):
         raise ConfigError(name, f"expected a table with a kind ({', '.join(sorted(table))}), got {section!r}")
-    kind = section.get("kind")
+    kind = canonical_kind(registry, section.get("kind"))
     if not isinstance(kind, str) or kind not in table:
-        raise ConfigError(f"{name}.kind", f"expected one of {', '.join(sorted(table))}; got {kind!r}")
+        known = sorted([*table, *ALIASES.get(registry, {})])
+        raise ConfigError(f"{name}.kind", f"expected one of {', '.join(known)}; got {section.get('kind')!r}")
     target, first = table[kind]
     ctor = _resolve(target)
     params = _params(ctor, first)
@@ -219,10 +227,10 @@ def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled
         raise ConfigError("simulation", "expected a table with t_final, dt, method")
     check_names(list(section), ["t_final", "dt", "method", "backend", "rtol", "atol", "log_every", "max_state",
                                 "control_period", "discretization"], "simulation")
-    compiled = section.get("backend", "numpy") != "numpy"
-    if compiled and (str(section.get("method", "rk4")).lower() != "rk4" or "control_period" in section):
-        raise ConfigError("simulation.backend", "the compiled backend steps the continuous-time fixed-step 'rk4'; "
-                          "drop backend for solve_ivp methods and sampled-data control")
+    backend = check_backend(section.get("backend", "auto"))
+    if backend == "jax" and str(section.get("method", "rk4")).lower() != "rk4":
+        raise ConfigError("simulation.backend", "the compiled backend steps the fixed-step 'rk4' (continuous or "
+                          "sampled-data); solve_ivp methods run on numpy: drop backend or use method = 'rk4'")
     if "t_final" not in section:
         raise ConfigError("simulation.t_final", "missing: the simulated time in seconds")
     t_final = as_scalar(section["t_final"], "simulation.t_final", positive=True)
@@ -236,7 +244,7 @@ def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled
                               f"control ticks, got {method!r}")
         if "rtol" in section or "atol" in section:
             raise ConfigError("simulation.rtol", "tolerances apply to solve_ivp methods, not to sampled-data control")
-        integ = Sampled(section["control_period"], section.get("dt"), section.get("discretization", "euler"))
+        integ = Sampled(section["control_period"], section.get("dt"), section.get("discretization", "euler"), backend)
         if integ.control_period > t_final:
             raise ConfigError("simulation.control_period", f"the control period {integ.control_period:g} s is longer "
                               f"than t_final = {t_final:g} s")
@@ -250,7 +258,7 @@ def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled
         if method.lower() == "rk4":
             if "rtol" in section or "atol" in section:
                 raise ConfigError("simulation.rtol", "tolerances apply to solve_ivp methods, not to the fixed-step 'rk4'")
-            integ = RK4(dt, section.get("backend", "numpy"))
+            integ = RK4(dt, backend)
         else:
             integ = SolveIVP(method, section.get("rtol", 1e-8), section.get("atol", 1e-10), dt)
     log_every = section.get("log_every", 1)

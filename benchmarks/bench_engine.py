@@ -1,0 +1,82 @@
+"""The engine against the plain loop, in one run (issue "One engine"; run by `make bench`, never by pytest).
+
+Every row is a ratio to the plain Python RK4 loop of Example 6.3.1 (10 s at 1 kHz, written out in bench_single_run.py)
+timed in this same run:
+
+* one run in this process: solve_ivp RK45 by hand, robotadapt's numpy path, robotadapt's compiled path (steady state);
+* one run end to end in a fresh process, `robotadapt run example-6.3.1` (import, trace, compile or load from the disk
+  cache, run, result.npz, metrics.json and the three figures), with an empty compilation cache (cold) and with the cache
+  the first process left (warm); the plain loop's reference is its own time;
+* the PUMA 560's compiled Slotine–Li loop: the first compiled run of a fresh process (trace, compile, 2 s simulated),
+  cold and from the cache;
+* the default sweep `robotadapt sweep example-6.3.1 --random controller.Kv=5:20 --n N` end to end (N = 10⁴ unless
+  `--quick`), per run against one plain-loop run; and its peak memory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from bench_single_run import naive_rk4, naive_solve_ivp, robotadapt_simulate, timed
+
+HERE = Path(__file__).resolve().parent
+CLI = [sys.executable, "-m", "robotadapt"]
+
+
+def fresh(args: list[str], cache: str) -> float:
+    """Wall time of a fresh process running `args` with the compilation cache in `cache`."""
+    env = dict(os.environ, ROBOTADAPT_CACHE=cache)
+    t0 = time.perf_counter()
+    subprocess.run(args, check=True, capture_output=True, env=env)
+    return time.perf_counter() - t0
+
+
+def children_peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+
+
+PUMA = ("from robotadapt.studies.scenarios import load; import time; t0 = time.perf_counter(); "
+        "load('puma560-slotine-li', ['simulation.t_final=2.0', \"simulation.backend='jax'\"]).run(); "
+        "print(time.perf_counter() - t0)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="a 1000-run sweep instead of 10⁴")
+    n_sweep = 1000 if parser.parse_args().quick else 10_000
+    t_loop, _ = timed(naive_rk4, 3)
+    rows = [("plain Python RK4 loop (the baseline)", t_loop, 1)]
+    rows.append(("numpy + solve_ivp RK45, by hand", timed(naive_solve_ivp, 3)[0], 1))
+    rows.append(("robotadapt, numpy path", timed(lambda: robotadapt_simulate("numpy"), 1)[0], 1))
+    robotadapt_simulate("jax")
+    rows.append(("robotadapt, compiled path (steady)", timed(lambda: robotadapt_simulate("jax"), 5)[0], 1))
+    with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
+        derived = Path(os.environ.get("ROBOTADAPT_CACHE", Path.home() / ".cache" / "robotadapt")) / "dh"
+        if derived.is_dir():  # the PUMA's sympy derivation is not what is timed: only the JAX cache starts empty
+            shutil.copytree(derived, Path(cache) / "dh")
+        run = [*CLI, "run", "example-6.3.1", "--out", out]
+        rows.append(("`robotadapt run example-6.3.1`, fresh, cold", fresh(run, cache), 1))
+        rows.append(("`robotadapt run example-6.3.1`, fresh, warm", fresh(run, cache), 1))
+        puma = [sys.executable, "-c", PUMA]
+        rows.append(("PUMA 560 compiled run (2 s), fresh, cold", fresh(puma, cache), 1))
+        rows.append(("PUMA 560 compiled run (2 s), fresh, cached", fresh(puma, cache), 1))
+        sweep = [*CLI, "sweep", "example-6.3.1", "--random", "controller.Kv=5:20", "--n", str(n_sweep), "--out",
+                 str(Path(out) / "sweep")]
+        rows.append((f"`robotadapt sweep … --n {n_sweep}` (default backend)", fresh(sweep, cache), n_sweep))
+    print("Example 6.3.1 (10 s at 1 kHz); ratio = plain-loop time × runs / time")
+    print(f"{'what':<52} {'wall (s)':>9} {'runs':>6} {'vs plain loop':>14}")
+    for name, seconds, runs in rows:
+        print(f"{name:<52} {seconds:>9.3f} {runs:>6} {t_loop * runs / seconds:>13.2f}x")
+    print(f"peak RSS of a child process (the sweep's parent): {children_peak_rss_mb():.0f} MB")
+
+
+if __name__ == "__main__":
+    main()
