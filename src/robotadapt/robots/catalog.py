@@ -39,16 +39,23 @@ def _scenario_names() -> Iterator[None]:
         raise ConfigError(field, exc.reason.replace("(robot.locked)", "(robot.locked_joints)")) from None
 
 
+def _pinocchio(model: str, rotor_inertia: bool) -> Any:
+    """The PinocchioArm class when `model` asks for it (it has no rotor-inertia columns), else None."""
+    if _check(model, URDF_MODELS) == "tree":
+        return None
+    if rotor_inertia:
+        raise ConfigError("robot.rotor_inertia", "the Pinocchio model has no rotor-inertia columns: use model = 'tree'")
+    from .pinocchio import PinocchioArm
+
+    return PinocchioArm
+
+
 def urdf_arm(path: str | Path, locked_joints: Any = (), viscous: bool = False, coulomb: bool = False,
              rotor_inertia: bool = False, gravity: Any = None, model: str = "tree") -> RobotModel:
     """An arm from a URDF file: joints in `locked_joints` held at zero; friction and rotor-inertia columns on request."""
-    if _check(model, URDF_MODELS) == "pinocchio":
-        if rotor_inertia:
-            raise ConfigError("robot.rotor_inertia", "the Pinocchio model has no rotor-inertia columns: use "
-                              "model = 'tree'")
-        from .pinocchio import PinocchioArm
-
-        return PinocchioArm.from_urdf(path, locked_joints, viscous, coulomb, gravity)
+    reference = _pinocchio(model, rotor_inertia)
+    if reference is not None:
+        return reference.from_urdf(path, locked_joints, viscous, coulomb, gravity)
     with _scenario_names():
         return KinematicTree.from_urdf(path, tuple(locked_joints), rotor_inertia, viscous, coulomb, gravity)
 
@@ -56,13 +63,9 @@ def urdf_arm(path: str | Path, locked_joints: Any = (), viscous: bool = False, c
 def example_arm(name: str, locked_joints: Any = (), viscous: bool = False, coulomb: bool = False,
                 rotor_inertia: bool = False, gravity: Any = None, model: str = "tree") -> RobotModel:
     """An arm of example-robot-data by name (`robotadapt.robots.pinocchio.EXAMPLES`; grippers locked)."""
-    if _check(model, URDF_MODELS) == "pinocchio":
-        if rotor_inertia:
-            raise ConfigError("robot.rotor_inertia", "the Pinocchio model has no rotor-inertia columns: use "
-                              "model = 'tree'")
-        from .pinocchio import PinocchioArm
-
-        return PinocchioArm.example(name, locked_joints, viscous, coulomb, gravity)
+    reference = _pinocchio(model, rotor_inertia)
+    if reference is not None:
+        return reference.example(name, locked_joints, viscous, coulomb, gravity)
     with _scenario_names():
         arm = KinematicTree.example(name, tuple(locked_joints), rotor_inertia, viscous, coulomb)
     return arm if gravity is None else replace(arm, g=np.asarray(gravity, dtype=float))
