@@ -3,7 +3,8 @@ implements it), cli.md (the command-line reference, from the parsers) and audit.
 
 Run `python docs/generate.py` after changing docstrings, commands or messages; tests/test_docs.py fails while a page is
 out of date. The theory map is read from the docstrings and comments of src/robotadapt (an equation cited there is
-implemented or evaluated there); equations that are steps of a proof say which result or test stands for them.
+implemented or evaluated there); equations that are steps of a proof say which result or test stands for them. keys.md
+(every scenario key) is read from the constructors' signatures.
 """
 
 from __future__ import annotations
@@ -146,6 +147,11 @@ AUDIT = [  # (what is wrong, command-line arguments; FILE is a scenario file wri
 ]
 
 
+def _escape_cell(text: str) -> str:
+    """Markdown-safe table cell: `|` would split the cell, and `[a] [b]` (NumPy prints matrices so) reads as a link."""
+    return text.replace("|", "\\|").replace("[", "\\[").replace("]", "\\]")
+
+
 def audit_page() -> str:
     """Run every case through the CLI and tabulate the one line it prints."""
     import contextlib
@@ -171,13 +177,171 @@ def audit_page() -> str:
             err = io.StringIO()
             with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
                 code = main([*args, "--out", str(Path(tmp) / "out")] if args[0] in ("run", "compare") else args)
-            message = err.getvalue().strip().replace(tmp, "TMP").replace("|", "\\|")
+            message = _escape_cell(err.getvalue().strip().replace(tmp, "TMP"))
             shown = " ".join(a if not a.startswith("FILE:") else "FILE" for a in argv)
             rows.append(f"| {what}: `robotadapt {shown}` | {code} | {message} |")
     return "\n".join(rows) + "\n"
 
 
-PAGES = {"theory.md": theory_page, "cli.md": cli_page, "audit.md": audit_page}
+# What each scenario key means: key (or "section.key" where a name means different things) → meaning, unit, a typical
+# value. keys_page() reads the keys and their defaults from the constructors; a key missing here shows "—".
+MEANINGS = {
+    "l1": ("length of link 1", "m", "1.0"), "l2": ("length of link 2", "m", "1.0"),
+    "g": ("gravity (a number: down the plane; dh: a 3-vector in the base frame)", "m/s²", "9.8"),
+    "friction_terms": ("add viscous friction columns to Y", "—", "false"),
+    "stiffness": ("add a joint-spring column to Y", "—", "false"),
+    "n_links": ("number of links (and joints)", "—", "3"), "lengths": ("link lengths, one or one per link", "m", "[1, 0.8, 0.5]"),
+    "masses": ("link masses, one or one per link", "kg", "[2, 1, 0.5]"),
+    "rods": ("uniform rods (true) or point masses at the link ends (false)", "—", "false"),
+    "rotor_inertia": ("add reflected rotor-inertia columns (planar: values per joint)", "kg m²", "false"),
+    "viscous": ("add viscous friction columns", "N m s/rad", "false"), "coulomb": ("add Coulomb friction columns", "N m", "false"),
+    "model": ("the model's engine: 'tree' (recursive, any n), 'sympy' (closed form), 'pinocchio' (reference)", "—", "'tree'"),
+    "links": ("the DH table: a list of link tables, keys below", "—", "[[robot.links]] …"),
+    "convention": ("DH convention: 'standard' or 'modified'", "—", "'standard'"),
+    "path": ("URDF file (relative to the scenario file)", "—", "'arm.urdf'"),
+    "name": ("example-robot-data arm", "—", "'panda'"), "locked_joints": ("joints held at zero", "—", "['finger_joint1']"),
+    "gravity": ("gravity 3-vector in the base frame (default the file's)", "m/s²", "[0, 0, -9.81]"),
+    "trajectory.amplitude": ("amplitude: a number, one per joint, or per frequency (sum_of_sines: see scenarios.md)",
+                             "rad", "1.0"),
+    "trajectory.omega": ("angular frequency, or the list of frequencies (sum_of_sines)", "rad/s", "1.0"),
+    "trajectory.phase": ("phase", "rad", "0.0"), "trajectory.offset": ("constant offset per joint", "rad", "0.0"),
+    "final": ("final value", "rad", "1.0"), "rate": ("exponential rate a of 1 − e^(−at)", "1/s", "2.0"),
+    "start": ("start value", "rad", "0.0"), "trajectory.q0": ("start position", "rad", "[0, 0]"),
+    "trajectory.q1": ("end position", "rad", "[1, 1]"), "t0": ("start time", "s", "0.0"), "t1": ("end time", "s", "2.0"),
+    "value": ("set point", "rad", "[0.5, 0.5]"),
+    "Lam": ("Λ, the error's weight in r = ė + Λe (a number, a list: diagonal, or a matrix)", "1/s", "2.5"),
+    "Kv": ("K_v, the velocity-error (or r) feedback gain", "N m s/rad", "10.0"),
+    "Kp": ("K_p, the position-error gain", "N m/rad", "20.0"),
+    "Ka": ("k_a (DCAL): the gain of the ‖e‖² terms of the auxiliary signal", "N m/rad²", "1.0"),
+    "Gamma": ("Γ, the adaptation gain (p×p); or {scale = s, eps = ε}: Γ_k = s(|φ_k| + ε) from the plant's φ",
+              "per parameter", "20.0 or {scale = 10}"),
+    "phi_hat0": ("φ̂(0), the initial estimate: a list of p, a number for all (0: zeros), or {scale = s}: s × plant.phi",
+                 "per parameter", "0 or {scale = 0.7}"),
+    "a": ("the torque filter's pole a of a/(s + a) (composite)", "1/s", "10.0"),
+    "P0": ("P(0), the least-squares gain", "per parameter", "10.0"), "forgetting": ("forgetting factor λ", "1/s", "0.0"),
+    "k0": ("bound on the least-squares gain's norm (none: unbounded)", "—", "100.0"),
+    "Q": ("Q of the Lyapunov equation (adaptive computed torque)", "—", "1.0"),
+    "P": ("P of the Lyapunov equation (default: solved from Q)", "—", "—"),
+    "phi_min": ("lower bounds of the projection", "per parameter", "[0.1, 0.1]"),
+    "phi_max": ("upper bounds of the projection", "per parameter", "[10, 10]"),
+    "servo": ("the servo filter, a table with a kind (below)", "—", "{kind = 'pd', Lam = 2.5}"),
+    "law": ("the update law, a table with a kind (below)", "—", "{kind = 'gradient', Gamma = 20}"),
+    "base": ("the adaptive law it makes robust, a [controller] table", "—", "{kind = 'slotine_li', …}"),
+    "kd": ("k_d, the robust term's gain", "N m", "5.0"), "boundary_layer": ("boundary layer of the sign function", "rad/s", "0.01"),
+    "precompute": ("tabulate Y_d(t) over one period first", "—", "false"),
+    "kL": ("k_L, the learning gain", "—", "1.0"), "period": ("period of the trajectory (default: the trajectory's)", "s", "6.28"),
+    "u_min": ("lower saturation of the learned torque", "N m", "-50"), "u_max": ("upper saturation", "N m", "50"),
+    "Psi": ("Ψ, the PID servo's integral gain", "1/s²", "1.0"), "D": ("G(s)'s direct term D", "—", "[[2.5, 0], [0, 2.5]]"),
+    "A": ("G(s)'s state matrix A", "—", "[[-1]]"), "B": ("G(s)'s input matrix B", "—", "[[1, 0]]"),
+    "C": ("G(s)'s output matrix C", "—", "[[1], [0]]"), "K_I": ("K_I, the Landau PI law's integral gain", "—", "20.0"),
+    "F_p": ("F_p, the Landau PI law's proportional gain", "—", "2.0"), "phi0": ("φ₀, the prior estimate σ pulls towards", "—", "0"),
+    "sigma0": ("σ₀, the leakage", "1/s", "1.0"), "scaled": ("switching σ (scaled by ‖φ̂ − φ₀‖)", "—", "false"),
+    "phi": ("the true parameters φ, in the robot's param_names order (default: the robot's published values)",
+            "per parameter", "[0.8, 2.3]"),
+    "plant.q0": ("initial joint position", "rad", "[0.1, 0]"), "dq0": ("initial joint velocity", "rad/s", "0.0"),
+    "disturbance": ("T_d = A sin(ωt + φ) + b: a table of amplitude (N m), omega (rad/s), phase (rad), bias (N m)",
+                    "—", "{amplitude = 2, omega = 10}"),
+    "disturbance.amplitude": ("amplitude A, one or per joint", "N m", "2.0"),
+    "disturbance.omega": ("angular frequency ω", "rad/s", "10.0"), "disturbance.phase": ("phase", "rad", "0.0"),
+    "disturbance.bias": ("constant part b", "N m", "[2, 1]"),
+    "robot": ("the true robot, a [robot] table (default: the controller's)", "—", "{kind = 'two_link', l1 = 1.1}"),
+    "payload": ("payload mass", "kg", "0.5"), "payload_offset": ("payload offset in the last link's frame", "m", "[0, 0, 0]"),
+    "payload_time": ("time the payload is picked up", "s", "5.0"),
+    "torque_limit": ("actuator saturation |τ| ≤ limit", "N m", "50"), "torque_rate_limit": ("torque slew-rate limit", "N m/s", "1000"),
+    "delay_samples": ("input delay in control periods (sampled-data)", "—", "1"),
+    "encoder_resolution": ("encoder quantum", "rad", "1e-4"),
+    "velocity": ("velocity estimate: 'exact', 'difference' or 'filter'", "—", "'exact'"),
+    "velocity_cutoff": ("cut-off of the velocity filter", "rad/s", "100"), "noise_q": ("position noise std", "rad", "1e-4"),
+    "noise_dq": ("velocity noise std", "rad/s", "1e-3"), "seed": ("seed of the sensor noise", "—", "0"),
+    "elastic_joint.J": ("motor-side inertia", "kg m²", "0.1"), "elastic_joint.K": ("joint stiffness", "N m/rad", "1000"),
+    "elastic_joint.D": ("joint damping", "N m s/rad", "1.0"), "R": ("armature resistance", "Ω", "1.0"),
+    "L": ("armature inductance", "H", "1e-3"), "k_t": ("torque constant", "N m/A", "0.1"),
+    "k_b": ("back-emf constant", "V s/rad", "0.1"), "gear_ratio": ("gear ratio", "—", "100"),
+    "motor.rotor_inertia": ("rotor inertia", "kg m²", "1e-5"), "current_gain": ("current-loop gain", "V/A", "10"),
+    "voltage_limit": ("voltage saturation", "V", "24"),
+    "t_final": ("simulated time", "s", "10.0"), "dt": ("integration step (max step for solve_ivp; plant sub-step "
+                                                      "when sampled)", "s", "1e-3"),
+    "method": ("'rk4' (fixed step) or a solve_ivp method ('RK45', 'DOP853', 'Radau', …)", "—", "'rk4'"),
+    "backend": ("'auto' (compiled unless short), 'numpy' or 'jax'", "—", "'auto'"),
+    "rtol": ("solve_ivp relative tolerance", "—", "1e-8"), "atol": ("solve_ivp absolute tolerance", "—", "1e-10"),
+    "log_every": ("keep every k-th step", "—", "1"), "max_state": ("divergence guard on |state|", "—", "1e6"),
+    "control_period": ("sampled-data control period (zero-order hold)", "s", "1e-3"),
+    "discretization": ("update-law discretization: 'euler' or 'hold'", "—", "'euler'"),
+    "joint": ("'R' revolute or 'P' prismatic", "—", "'R'"), "alpha": ("DH link twist", "rad", "1.5708"),
+    "d": ("DH link offset", "m", "0.1"), "theta": ("DH joint angle offset", "rad", "0.0"), "m": ("link mass", "kg", "1.0"),
+    "com": ("centre of mass in the link's DH frame", "m", "[-0.25, 0, 0]"),
+    "inertia": ("inertia about the centre of mass: 3 principal moments or a 3×3 tensor", "kg m²", "[0.01, 0.01, 0.02]"),
+    "q_limits": ("joint limits [lower, upper]", "rad", "[-3.14, 3.14]"),
+    "links.a": ("DH link length", "m", "0.5"), "links.rotor_inertia": ("rotor inertia", "kg m²", "0.0"),
+    "links.viscous": ("viscous friction", "N m s/rad", "0.0"), "links.coulomb": ("Coulomb friction", "N m", "0.0"),
+}
+
+
+def _cell(value: object) -> str:
+    from robotadapt.studies.scenarios.build import REQUIRED, plain
+    from robotadapt.studies.scenarios.loader import toml_value
+
+    if value is REQUIRED:
+        return "required"
+    if value is None:
+        return "none"
+    shown = plain(value)
+    return f"`{toml_value(shown)}`".replace("|", "\\|") if shown is not None else "—"
+
+
+def _key_rows(where: str, defaults: dict, special: dict | None = None) -> list[str]:
+    rows = ["| key | meaning | unit | default | typical |", "|---|---|---|---|---|"]
+    for key, default in defaults.items():
+        meaning, unit, typical = MEANINGS.get(f"{where}.{key}", MEANINGS.get(key, ("—", "—", "—")))
+        shown = (special or {}).get(key, _cell(default))
+        rows.append(f"| `{key}` | {meaning} | {unit} | {shown} | `{typical}` |".replace("``—`", "—").replace("`—`", "—"))
+    return rows
+
+
+def keys_page() -> str:
+    """Every scenario key of every kind, read from the constructors' signatures; meanings from MEANINGS."""
+    from robotadapt.robots.symbolic import LINK_KEYS
+    from robotadapt.studies.scenarios.build import PLANT_TABLES, REGISTRY, REQUIRED, SIMULATION, _signature, keys, plant_keys
+
+    out = ["# Scenario keys", "",
+           "Every key of every section and kind, with its meaning, unit, default and a typical value. Generated by "
+           "`python docs/generate.py` from the constructors' signatures (`REGISTRY` of "
+           "`robotadapt.studies.scenarios.build`); tests/test_keys.py checks it is current. See "
+           "[Scenario files](scenarios.md) for the layout. A section with unknown or missing keys is reported in one "
+           "message naming all of them.", ""]
+    where = {"robot": "robot", "trajectory": "trajectory", "controller": "controller", "servo": "controller.servo",
+             "law": "controller.law"}
+    zeros = {"phi_hat0": "zeros"}
+    for registry, table in REGISTRY.items():
+        out += [f"## [{where[registry]}]", ""]
+        for kind in table:
+            out += [f"### kind = \"{kind}\"", "", *_key_rows(registry, keys(registry, kind), zeros), ""]
+        if registry == "robot":
+            defaults = {k: REQUIRED if k == "m" else 0.0 for k in LINK_KEYS}
+            defaults.update(joint="R", q_limits=None)
+            out += ["### dh: each of `links[i]` (`[[robot.links]]`)", "",
+                    *_key_rows("links", defaults), ""]
+    pk = plant_keys()
+    out += ["## [plant]", "", *_key_rows("plant", {k: v for k, v in pk.items() if k != "disturbance"},
+                                        {"phi": "the robot's published values", "robot": "the controller's robot",
+                                         "payload": "none"}), ""]
+    out += ["### [plant.disturbance]", "", *_key_rows("disturbance", pk["disturbance"]), ""]
+    for key, ctor in PLANT_TABLES.items():
+        out += [f"### [plant.{key}]", "", *_key_rows(key, _signature(ctor, "n")), ""]
+    out += ["## [simulation]", "", *_key_rows("simulation", SIMULATION), "",
+            "## Parameter order", "",
+            "`plant.phi`, `controller.phi_hat0` and a per-parameter Γ list the parameters in the robot's `param_names` "
+            "order. For arms with many parameters (planar, dh, urdf, example_robot, puma560) print it with "
+            "`python -c \"from robotadapt.studies.scenarios import load; "
+            "print(load('SCENARIO').setup.plant.model.param_names)\"`.", ""]
+    from robotadapt.studies.scenarios.build import robot
+
+    for kind in ("one_link", "two_link", "polar"):
+        out.append(f"- `{kind}`: {', '.join(robot({'kind': kind}).param_names)}")
+    return "\n".join(out) + "\n"
+
+
+PAGES = {"theory.md": theory_page, "cli.md": cli_page, "audit.md": audit_page, "keys.md": keys_page}
 
 if __name__ == "__main__":
     for name, make in PAGES.items():

@@ -124,7 +124,8 @@ def _skip_reason(name: str) -> str | None:
     if "control_period" in data.get("simulation", {}):
         return "sampled-data control: compiled by its own engine (tests/test_sampled.py)"
     if data["robot"]["kind"] in ("urdf", "example_robot"):
-        return "a URDF arm through Pinocchio (C++ calls, not traceable) until its JAX model lands"
+        return ("a URDF arm: its numpy reference is Pinocchio's model, compared with the compiled KinematicTree in "
+                "tests/test_kinematic_tree.py")
     return None
 
 

@@ -102,12 +102,24 @@ def check_spd(arr: Array, field: str, semidefinite: bool = False) -> None:
         raise ConfigError(field, f"must be positive definite (smallest eigenvalue {eig.min():.3g}); use positive gains")
 
 
-def check_names(given: Sequence[str], known: Sequence[str], section: str) -> None:
-    """Raise on the first name in `given` that is not in `known`."""
-    for name in given:
-        if name not in known:
-            raise ConfigError(f"{section}.{name}", f"unknown key; known keys here: {', '.join(sorted(known))}")
+def check_names(given: Sequence[str], known: Sequence[str], section: str, required: Sequence[str] = ()) -> None:
+    """Raise once, naming every name in `given` that is not in `known` and every name of `required` not given.
 
+    One problem names its key as the field (`section.key`); several are listed together under `section`.
+    """
+    unknown = [name for name in given if name not in known]
+    missing = [name for name in required if name not in given]
+    if not unknown and not missing:
+        return
+    parts = []
+    if unknown:
+        parts.append(f"unknown key{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}" if len(unknown) + len(missing) > 1
+                     else "unknown key")
+    if missing:
+        parts.append(f"missing key{'s' if len(missing) > 1 else ''} {', '.join(missing)}" if len(unknown) + len(missing) > 1
+                     else "missing")
+    field = f"{section}.{(unknown or missing)[0]}" if len(unknown) + len(missing) == 1 else section
+    raise ConfigError(field, f"{'; '.join(parts)}; known keys here: {', '.join(sorted(known))}")
 
 
 def check_switch(value: Any, field: str) -> None:

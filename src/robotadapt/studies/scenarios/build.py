@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib
 import inspect
 from collections.abc import Callable
-from dataclasses import MISSING, dataclass, fields, is_dataclass
+from dataclasses import MISSING, dataclass, field, fields, is_dataclass
 from functools import cache
 from typing import Any
 
@@ -21,7 +21,7 @@ from ...plant.sensors import Sensor
 from ...plant.unmodeled import ElasticJoint, Payload
 from ...robots import RobotModel
 from ...sim.integrators import RK4, Sampled, SolveIVP, check_backend
-from ...validation import ConfigError, as_scalar, as_vector, check_names
+from ...validation import ConfigError, as_array, as_scalar, as_vector, check_names
 
 # kind → "module:attribute" (imported on use, so optional parts cost nothing until named) and what the constructor
 # takes first: the robot model, the joint count n, the parameter count p, or nothing.
@@ -97,24 +97,59 @@ class Setup:
     dq0: np.ndarray
     log_every: int
     max_state: float
+    data: dict[str, Any] = field(default_factory=dict)  # the scenario with every value used written out
+
+
+REQUIRED = inspect.Parameter.empty  # the default of a key that has none
 
 
 def _params(ctor: Callable[..., Any], first: str | None) -> dict[str, bool]:
     """The constructor's keyword names (less its first argument) → whether each is required."""
-    return dict(_signature(ctor, first))
+    return {k: v is REQUIRED for k, v in _signature(ctor, first).items()}
 
 
 @cache  # inspecting a signature costs more than building the object: once per constructor
-def _signature(ctor: Callable[..., Any], first: str | None) -> dict[str, bool]:
+def _signature(ctor: Callable[..., Any], first: str | None) -> dict[str, Any]:
+    """The constructor's keyword names (less its first argument) → default value, or REQUIRED."""
     if is_dataclass(ctor):
-        names = {f.name: f.default is MISSING and f.default_factory is MISSING for f in fields(ctor)
-                 if not f.metadata.get("internal")}
+        names = {f.name: f.default if f.default is not MISSING else
+                 f.default_factory() if f.default_factory is not MISSING else REQUIRED  # type: ignore[misc]
+                 for f in fields(ctor) if not f.metadata.get("internal")}
     else:
         sig = inspect.signature(ctor)
-        names = {k: p.default is inspect.Parameter.empty for k, p in sig.parameters.items()}
+        names = {k: p.default for k, p in sig.parameters.items()}
     if first is not None:
         names.pop(next(iter(names)))
     return names
+
+
+def keys(registry: str, kind: str) -> dict[str, Any]:
+    """The keys a `kind` of `registry` takes → default (REQUIRED when it has none): the constructor's signature."""
+    target, first = REGISTRY[registry][canonical_kind(registry, kind)]
+    return dict(_signature(_resolve(target), first))
+
+
+def plain(value: Any) -> Any:
+    """`value` as TOML can write it (arrays and tuples as lists, numpy numbers as floats), or None when it cannot."""
+    if isinstance(value, np.ndarray | tuple | list):
+        items = [plain(v) for v in (value.tolist() if isinstance(value, np.ndarray) else value)]
+        return None if any(v is None for v in items) else items
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    return None
+
+
+def _with_defaults(section: dict[str, Any], defaults: dict[str, Any]) -> dict[str, Any]:
+    """`section` with every default it leaves out that TOML can write (None defaults stay out: they mean "none")."""
+    out = dict(section)
+    for key, default in defaults.items():
+        if key not in out and default is not REQUIRED and plain(default) is not None:
+            out[key] = plain(default)
+    return out
 
 
 def canonical_kind(registry: str, kind: Any) -> Any:
@@ -122,9 +157,29 @@ def canonical_kind(registry: str, kind: Any) -> Any:
     return ALIASES.get(registry, {}).get(kind, kind) if isinstance(kind, str) else kind
 
 
+def _names(names: tuple[str, ...] | list[str], shown: int = 8) -> str:
+    """Parameter names in order, or the first few and where the whole order is listed."""
+    if len(names) <= shown:
+        return ", ".join(names)
+    return f"{', '.join(names[:shown - 2])}, ... (all {len(names)}: docs/keys.md, 'Parameter order')"
+
+
+def per_parameter(value: Any, model: RobotModel, field: str, *, broadcast: bool) -> np.ndarray:
+    """A vector of the model's `p` parameters; a wrong length names `p` and the parameters in order. A plain number is
+    the same value for every parameter when `broadcast` (`phi_hat0 = 0`: zeros)."""
+    arr = as_array(value, field)
+    if arr.ndim == 0 and broadcast:
+        return np.full(model.p, float(arr))
+    if arr.shape != (model.p,):
+        got = f"{arr.shape[0]} numbers" if arr.ndim == 1 else "a number" if arr.ndim == 0 else f"shape {arr.shape}"
+        raise ConfigError(field, f"expected a list of {model.p} numbers, one per parameter in the order "
+                          f"{_names(model.param_names)}; got {got}")
+    return arr
+
+
 def build(registry: str, section: Any, name: str, model: RobotModel | None = None) -> Any:
     """Call the constructor that `section['kind']` names in `REGISTRY[registry]` with the section's other keys; nested
-    tables (servo, law, base) are built first. `phi_hat0` defaults to zeros."""
+    tables (servo, law, base) are built first. `phi_hat0` defaults to zeros; a plain number is that value for all."""
     table = REGISTRY[registry]
     if not isinstance(section, dict):
         raise ConfigError(name, f"expected a table with a kind ({', '.join(sorted(table))}), got {section!r}")
@@ -136,12 +191,12 @@ def build(registry: str, section: Any, name: str, model: RobotModel | None = Non
     ctor = _resolve(target)
     params = _params(ctor, first)
     keys = {k: v for k, v in section.items() if k != "kind"}
-    check_names(list(keys), list(params), name)
-    if "phi_hat0" in params and model is not None:
-        keys.setdefault("phi_hat0", np.zeros(model.p))
-    for key, required in params.items():
-        if required and key not in keys:
-            raise ConfigError(f"{name}.{key}", f"missing; kind {kind!r} takes {', '.join(params)}")
+    estimated = "phi_hat0" in params and model is not None
+    check_names(list(keys), list(params), name,
+                required=[k for k, req in params.items() if req and not (estimated and k == "phi_hat0")])
+    if estimated:
+        keys["phi_hat0"] = per_parameter(keys.get("phi_hat0", 0.0), model, f"{name}.phi_hat0",  # type: ignore[arg-type]
+                                         broadcast=True)
     for key in NESTED.keys() & keys.keys():
         keys[key] = build(NESTED[key], keys[key], f"{name}.{key}", model)
     args = () if first is None else ({"model": model, "n": model.n, "p": model.p}[first],)  # type: ignore[union-attr]
@@ -152,6 +207,21 @@ def build(registry: str, section: Any, name: str, model: RobotModel | None = Non
         if name == root or not (exc.field == root or exc.field.startswith(root + ".")):
             raise
         raise ConfigError(name + exc.field[len(root):], exc.reason) from None
+
+
+def resolved(registry: str, section: dict[str, Any], model: RobotModel | None = None) -> dict[str, Any]:
+    """A section that built, with every default its constructor used written out (nested tables too), so that the
+    written scenario reproduces the run if a default changes."""
+    target, first = REGISTRY[registry][canonical_kind(registry, section["kind"])]
+    defaults = _signature(_resolve(target), first)
+    out = _with_defaults(section, defaults)
+    if "phi_hat0" in defaults and model is not None and "phi_hat0" not in out:
+        out["phi_hat0"] = [0.0] * model.p
+    if isinstance(out.get("Gamma"), dict):
+        out["Gamma"] = {"eps": EPS, **out["Gamma"]}
+    for key in NESTED.keys() & out.keys():
+        out[key] = resolved(NESTED[key], out[key], model)
+    return out
 
 
 def robot(section: Any) -> RobotModel:
@@ -177,67 +247,89 @@ def _table(section: dict[str, Any], key: str, n: int) -> Any:
     params = _params(ctor, "n")
     if not isinstance(table, dict):
         raise ConfigError(f"plant.{key}", f"expected a table with {', '.join(params)}, got {table!r}")
-    check_names(list(table), list(params), f"plant.{key}")
-    for name, required in params.items():
-        if required and name not in table:
-            raise ConfigError(f"plant.{key}.{name}", f"missing; [plant.{key}] takes {', '.join(params)}")
+    check_names(list(table), list(params), f"plant.{key}", required=[k for k, req in params.items() if req])
     return ctor(n, **table)
 
 
-def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray, np.ndarray]:
+def plant_keys() -> dict[str, Any]:
+    """The flat keys of [plant] → default (REQUIRED for none; the actuator's and sensor's as their constructors')."""
+    dist = dict(_signature(sinusoidal_disturbance, "n"))
+    payload = _signature(Payload, None)
+    return {"phi": REQUIRED, "q0": 0.0, "dq0": 0.0, "disturbance": dist, "robot": REQUIRED,
+            **{key: payload[arg] for key, arg in PAYLOAD.items()}, **_signature(Actuator, "n"), **_signature(Sensor, "n")}
+
+
+def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray, np.ndarray, dict[str, Any]]:
     """The true plant: `robot` (a table like [robot], default the controller's model) with `phi` in its
     parameterization, `q0`, `dq0`, `disturbance`; a payload (`payload` kg at `payload_offset`, from `payload_time`); the
-    actuator's and the sensor's keys; `[plant.elastic_joint]` and `[plant.motor]` tables."""
+    actuator's and the sensor's keys; `[plant.elastic_joint]` and `[plant.motor]` tables. Also the section with every
+    value used written out."""
     if not isinstance(section, dict):
         raise ConfigError("plant", "expected a table with phi, q0, dq0 and optionally disturbance")
     actuator_keys, sensor_keys = list(_params(Actuator, "n")), list(_params(Sensor, "n"))
     check_names(list(section), ["phi", "q0", "dq0", "disturbance", "robot", *PAYLOAD, *actuator_keys, *sensor_keys,
                                 *PLANT_TABLES], "plant")
+    out = dict(section)
     truth = model
     if "robot" in section:
         truth = build("robot", section["robot"], "plant.robot")
         if truth.n != model.n:
             raise ConfigError("plant.robot", f"has {truth.n} joints, the controller's robot {model.n}")
+        out["robot"] = resolved("robot", section["robot"])
     if "phi" not in section:
         if truth.default_phi is None:
-            raise ConfigError("plant.phi", f"missing: the true parameters {', '.join(truth.param_names)}")
+            raise ConfigError("plant.phi", f"missing: the {truth.p} true parameters {_names(truth.param_names)}")
         section = dict(section, phi=truth.default_phi)  # the model's own (published or URDF) parameters
     dist = section.get("disturbance")
     if dist is not None:
         if not isinstance(dist, dict):
             raise ConfigError("plant.disturbance", "expected a table with amplitude, omega, phase, bias")
         check_names(list(dist), ["amplitude", "omega", "phase", "bias"], "plant.disturbance")
+        out["disturbance"] = _with_defaults(dist, _signature(sinusoidal_disturbance, "n"))
         dist = sinusoidal_disturbance(model.n, **dist)
-    phi = as_vector(section["phi"], truth.p, "plant.phi", broadcast=False)
+    phi = per_parameter(section["phi"], truth, "plant.phi", broadcast=False)
     q0 = as_vector(section.get("q0", 0.0), model.n, "plant.q0")
     dq0 = as_vector(section.get("dq0", 0.0), model.n, "plant.dq0")
+    out = {**dict(phi=phi.tolist(), q0=q0.tolist(), dq0=dq0.tolist()), **out}
     payload = {arg: section[key] for key, arg in PAYLOAD.items() if key in section}
     if payload and "mass" not in payload:
         raise ConfigError("plant.payload", "missing: the payload's mass (kg) for payload_offset / payload_time")
+    if payload:
+        out = _with_defaults(out, {key: _signature(Payload, None)[arg] for key, arg in PAYLOAD.items()})
     n = model.n
+    parts = [{k: section[k] for k in keys if k in section} for keys in (actuator_keys, sensor_keys)]
+    for given, ctor in zip(parts, (Actuator, Sensor), strict=True):
+        if given:  # a part's defaults only when the part is there: no key, no actuator (sensor) at all
+            out = _with_defaults(out, _signature(ctor, "n"))
+    for key, ctor in PLANT_TABLES.items():
+        if isinstance(section.get(key), dict):
+            out[key] = _with_defaults(section[key], _signature(ctor, "n"))
     return Plant(truth, phi, dist, Payload(**payload) if payload else None, _table(section, "elastic_joint", n),
-                 _table(section, "motor", n), _part(Actuator, {k: section[k] for k in actuator_keys if k in section}, n),
-                 _part(Sensor, {k: section[k] for k in sensor_keys if k in section}, n)), q0, dq0
+                 _table(section, "motor", n), _part(Actuator, parts[0], n), _part(Sensor, parts[1], n)), q0, dq0, out
 
 
-def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled, int, float]:
+# [simulation] keys → default (REQUIRED: none; None: not used unless given)
+SIMULATION: dict[str, Any] = {"t_final": REQUIRED, "dt": 1e-3, "method": "rk4", "backend": "auto", "rtol": 1e-8,
+                              "atol": 1e-10, "log_every": 1, "max_state": 1e6, "control_period": None,
+                              "discretization": "euler"}
+
+
+def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled, int, float, dict[str, Any]]:
     """t_final, the integrator (RK4, a solve_ivp method, or sampled-data control with `control_period`), log_every,
-    max_state."""
+    max_state, and the section with every value used written out."""
     if not isinstance(section, dict):
         raise ConfigError("simulation", "expected a table with t_final, dt, method")
-    check_names(list(section), ["t_final", "dt", "method", "backend", "rtol", "atol", "log_every", "max_state",
-                                "control_period", "discretization"], "simulation")
+    check_names(list(section), list(SIMULATION), "simulation", required=["t_final"])
     backend = check_backend(section.get("backend", "auto"))
     if backend == "jax" and str(section.get("method", "rk4")).lower() != "rk4":
         raise ConfigError("simulation.backend", "the compiled backend steps the fixed-step 'rk4' (continuous or "
                           "sampled-data); solve_ivp methods run on numpy: drop backend or use method = 'rk4'")
-    if "t_final" not in section:
-        raise ConfigError("simulation.t_final", "missing: the simulated time in seconds")
     t_final = as_scalar(section["t_final"], "simulation.t_final", positive=True)
     method = section.get("method", "rk4")
     if not isinstance(method, str):
         raise ConfigError("simulation.method", f"expected a name such as 'rk4' or 'RK45', got {method!r}")
     integ: RK4 | SolveIVP | Sampled
+    used = ["method", "backend", "log_every", "max_state"]
     if "control_period" in section:
         if method.lower() != "rk4":
             raise ConfigError("simulation.method", "sampled-data control integrates the plant with 'rk4' between "
@@ -248,56 +340,81 @@ def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled
         if integ.control_period > t_final:
             raise ConfigError("simulation.control_period", f"the control period {integ.control_period:g} s is longer "
                               f"than t_final = {t_final:g} s")
+        used.append("discretization")
     else:
         if "discretization" in section:
             raise ConfigError("simulation.discretization", "applies to sampled-data control: set "
                               "simulation.control_period")
-        dt = as_scalar(section.get("dt", 1e-3), "simulation.dt", positive=True)
+        dt = as_scalar(section.get("dt", SIMULATION["dt"]), "simulation.dt", positive=True)
         if dt > t_final:
             raise ConfigError("simulation.dt", f"the step {dt:g} s is longer than t_final = {t_final:g} s")
+        used.append("dt")
         if method.lower() == "rk4":
             if "rtol" in section or "atol" in section:
                 raise ConfigError("simulation.rtol", "tolerances apply to solve_ivp methods, not to the fixed-step 'rk4'")
             integ = RK4(dt, backend)
         else:
-            integ = SolveIVP(method, section.get("rtol", 1e-8), section.get("atol", 1e-10), dt)
+            integ = SolveIVP(method, section.get("rtol", SIMULATION["rtol"]), section.get("atol", SIMULATION["atol"]), dt)
+            used += ["rtol", "atol"]
     log_every = section.get("log_every", 1)
     if isinstance(log_every, bool) or not isinstance(log_every, int) or log_every < 1:
         raise ConfigError("simulation.log_every", f"expected a positive whole number, got {log_every!r}")
-    max_state = as_scalar(section.get("max_state", 1e6), "simulation.max_state", positive=True)
-    return t_final, integ, log_every, max_state
+    max_state = as_scalar(section.get("max_state", SIMULATION["max_state"]), "simulation.max_state", positive=True)
+    return t_final, integ, log_every, max_state, {**section, **{k: SIMULATION[k] for k in used if k not in section}}
 
 
-def _estimate(section: Any, the_plant: Plant, model: RobotModel) -> Any:
-    """`phi_hat0 = {scale = s}` in [controller]: s × the true value of each of the controller's parameters, e.g. 0.7
-    for an estimate 30 % low on all of them (n-DOF arms, whose φ has tens of entries). The true values are the plant's
-    entries of the same names, so the plant's robot may add parameters (friction) the controller's lacks."""
-    if isinstance(section, dict) and isinstance(section.get("base"), dict):  # the law a robust one wraps
-        section = dict(section, base=_estimate(section["base"], the_plant, model))
-    value = section.get("phi_hat0") if isinstance(section, dict) else None
-    if not isinstance(value, dict):
+EPS = 1e-3  # the default ε of Gamma = {scale = s, eps = ε}: Γ_k = s (|φ_k| + ε)
+
+
+def _truth_tables(section: Any, the_plant: Plant, model: RobotModel, name: str = "controller") -> Any:
+    """Resolve the tables of [controller] (and its nested base and law) that are written in terms of the true φ, so
+    that the law itself never sees the truth:
+
+    - `phi_hat0 = {scale = s}`: s × the true value of each of the controller's parameters, e.g. 0.7 for an estimate
+      30 % low on all of them (n-DOF arms, whose φ has tens of entries);
+    - `Gamma = {scale = s, eps = ε}`: the diagonal Γ_k = s (|φ_k| + ε), an adaptation gain scaled to each parameter's
+      size (a uniform Γ adapts parameters of very different sizes at very different relative rates).
+
+    The true values are the plant's entries of the same names, so the plant's robot may add parameters (friction) the
+    controller's lacks."""
+    if not isinstance(section, dict):
         return section
-    check_names(list(value), ["scale"], "controller.phi_hat0")
-    if "scale" not in value:
-        raise ConfigError("controller.phi_hat0.scale", "missing: phi_hat0 = {scale = 0.7} starts at 0.7 × plant.phi")
-    truth = dict(zip(the_plant.model.param_names, the_plant.phi, strict=True))
-    missing = [name for name in model.param_names if name not in truth]
-    if missing:
-        raise ConfigError("controller.phi_hat0", f"a scale of the true parameters needs the plant's robot to have the "
-                          f"controller's parameters; it lacks {', '.join(missing[:5])}: give phi_hat0 as a list")
-    scale = as_scalar(value["scale"], "controller.phi_hat0.scale")
-    return dict(section, phi_hat0=[scale * float(truth[name]) for name in model.param_names])
+    section = dict(section)
+    for key in NESTED.keys() & section.keys():  # the law a passivity-based one uses, the one a robust one wraps
+        section[key] = _truth_tables(section[key], the_plant, model, f"{name}.{key}")
+    for key, allowed in (("phi_hat0", ["scale"]), ("Gamma", ["scale", "eps"])):
+        value = section.get(key)
+        if not isinstance(value, dict):
+            continue
+        where = f"{name}.{key}"
+        check_names(list(value), allowed, where, required=["scale"])
+        truth = dict(zip(the_plant.model.param_names, the_plant.phi, strict=True))
+        missing = [p for p in model.param_names if p not in truth]
+        if missing:
+            raise ConfigError(where, f"a scale of the true parameters needs the plant's robot to have the "
+                              f"controller's parameters; it lacks {', '.join(missing[:5])}: give {key} as a list")
+        phi = np.array([float(truth[p]) for p in model.param_names])
+        if key == "phi_hat0":
+            section[key] = (as_scalar(value["scale"], f"{where}.scale") * phi).tolist()
+        else:
+            scale = as_scalar(value["scale"], f"{where}.scale", positive=True)
+            eps = as_scalar(value.get("eps", EPS), f"{where}.eps", nonnegative=True)
+            section[key] = (scale * (np.abs(phi) + eps)).tolist()  # a list gain is the diagonal
+    return section
 
 
 def setup(data: dict[str, Any]) -> Setup:
     """Build every object of a scenario (already parsed TOML), validating each field once."""
-    for name in ("robot", "plant", "trajectory", "controller", "simulation"):
-        if name not in data:
-            raise ConfigError(name, f"missing section [{name}]")
+    missing = [name for name in ("robot", "plant", "trajectory", "controller", "simulation") if name not in data]
+    if missing:
+        raise ConfigError(missing[0] if len(missing) == 1 else "scenario",
+                          f"missing section{'s' if len(missing) > 1 else ''} {', '.join(f'[{m}]' for m in missing)}")
     model = robot(data["robot"])
-    the_plant, q0, dq0 = plant(data["plant"], model)
-    t_final, integ, log_every, max_state = simulation(data["simulation"])
-    controller = build("controller", _estimate(data["controller"], the_plant, model), "controller", model)
-    return Setup(the_plant, controller,
-                 build("trajectory", data["trajectory"], "trajectory", model), t_final, integ, q0, dq0, log_every,
-                 max_state)
+    the_plant, q0, dq0, plant_data = plant(data["plant"], model)
+    t_final, integ, log_every, max_state, sim_data = simulation(data["simulation"])
+    controller = build("controller", _truth_tables(data["controller"], the_plant, model), "controller", model)
+    trajectory = build("trajectory", data["trajectory"], "trajectory", model)
+    full = {**data, "robot": resolved("robot", data["robot"]), "plant": plant_data,
+            "trajectory": resolved("trajectory", data["trajectory"], model),
+            "controller": resolved("controller", data["controller"], model), "simulation": sim_data}
+    return Setup(the_plant, controller, trajectory, t_final, integ, q0, dq0, log_every, max_state, full)

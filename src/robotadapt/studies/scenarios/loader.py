@@ -67,8 +67,9 @@ class Scenario:
 
     @property
     def text(self) -> str:
-        """The resolved scenario as TOML (what a run saves as scenario.toml)."""
-        return tomli_w.dumps(self.data)
+        """The resolved scenario as TOML (what a run saves as scenario.toml): every value the run used, the
+        constructors' defaults included, so that running the file again reproduces the run if a default changes."""
+        return tomli_w.dumps(self.setup.data or self.data)
 
     def run(self, progress: bool = False) -> Any:
         """Simulate this scenario; returns a :class:`~robotadapt.result.SimulationResult`."""
