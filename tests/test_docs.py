@@ -150,7 +150,8 @@ def test_laws_page_cites_every_law_next_to_its_code():
             ("dcal", "7.2.26", "robotadapt.controllers.dcal.DCAL"),
             ("repetitive", "7.2.48", "robotadapt.controllers.repetitive.Repetitive"),
             ("baselines", "6.2.2", "robotadapt.controllers.baseline.ComputedTorque")]:
-        section = text.split(f"{{#{anchor}}}", 1)[1].split("\n## ", 1)[0]
+        heading = text.rindex("\n", 0, text.index(f"{{#{anchor}}}")) + 1  # the section: its heading to the next `## `
+        section = text[heading:].split("\n## ", 1)[0]
         assert table in section and f"`{code}`" in section, anchor
     assert "spec §" not in text
 

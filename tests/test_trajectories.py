@@ -167,3 +167,31 @@ def test_bad_inputs_name_the_field(make, field):
     with pytest.raises(ConfigError, match=rf"^{re.escape(field)}: ") as info:
         make()
     assert info.value.field == field
+
+
+def test_sum_of_sines_is_the_public_constructor_and_its_shapes_are_unambiguous():
+    from robotadapt.trajectories import sum_of_sines
+
+    t = np.linspace(0.0, 2.0, 7)
+    # a scalar omega: a list amplitude is per joint
+    q = sum_of_sines(3, amplitude=[1.0, 2.0, 3.0], omega=2.0)(t).q_des
+    np.testing.assert_allclose(q, np.sin(2 * t)[:, None] * [1.0, 2.0, 3.0])
+    # a list omega: a list amplitude is per frequency, the same on every joint (here k == n: no guessing)
+    q = sum_of_sines(2, amplitude=[1.0, 0.5], omega=[1.0, 3.0])(t).q_des
+    np.testing.assert_allclose(q, np.repeat((np.sin(t) + 0.5 * np.sin(3 * t))[:, None], 2, axis=1))
+    # a table amplitude[joint][frequency]
+    q = sum_of_sines(2, amplitude=[[1.0, 0.0, 0.2], [0.0, 2.0, 0.0]], omega=[1.0, 2.0, 5.0])(t).q_des
+    np.testing.assert_allclose(q[:, 0], np.sin(t) + 0.2 * np.sin(5 * t))
+    np.testing.assert_allclose(q[:, 1], 2 * np.sin(2 * t))
+    with pytest.raises(ConfigError, match=r"^trajectory\.amplitude: a table is amplitude\[joint\]\[frequency\]: 2 rows "
+                                          r"of 3, got shape \(3, 2\) \(transpose it"):
+        sum_of_sines(2, amplitude=[[1.0, 0.0], [0.0, 2.0], [0.2, 0.0]], omega=[1.0, 2.0, 5.0])
+    with pytest.raises(ConfigError, match=r"^trajectory\.amplitude: a list gives one value per frequency: expected 1, "
+                                          r"got 2 \(with omega a list"):
+        sum_of_sines(2, amplitude=[1.0, 2.0], omega=[1.0])
+
+
+def test_the_scenario_kind_uses_the_public_constructor():
+    from robotadapt.studies.scenarios.build import REGISTRY
+
+    assert REGISTRY["trajectory"]["sum_of_sines"][0] == "trajectories:sum_of_sines"

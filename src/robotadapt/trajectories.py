@@ -81,23 +81,54 @@ class SumOfSines:
 
     @classmethod
     def make(cls, n: int, amplitude: Any, omega: Any, phase: Any = 0.0, offset: Any = 0.0) -> SumOfSines:
-        """Validate and broadcast. `omega` lists the k frequencies; `amplitude` and `phase` are each a number, a list of
-        k (one per term, same on every joint), or a k×n table."""
-        w = as_array(omega, "trajectory.omega").reshape(-1)
-        k = w.shape[0]
-        tables = [_term_table(value, k, n, f"trajectory.{name}") for name, value in (("amplitude", amplitude),
-                                                                                       ("phase", phase))]
-        return cls(tables[0], np.repeat(w[:, None], n, axis=1), tables[1], as_vector(offset, n, "trajectory.offset"))
+        """The same as :func:`sum_of_sines`."""
+        return sum_of_sines(n, amplitude, omega, phase, offset)
 
 
-def _term_table(value: Any, k: int, n: int, field: str) -> Array:
+def sum_of_sines(n: int, amplitude: Any, omega: Any, phase: Any = 0.0, offset: Any = 0.0) -> SumOfSines:
+    """q_des,i(t) = offset_i + Σ_k A_ik sin(ω_k t + φ_ik), validated and broadcast.
+
+    Parameters
+    ----------
+    n : int
+        Number of joints.
+    amplitude, phase : number, list or table
+        With a single frequency (`omega` a number): a number, or a list of `n` (one per joint).
+        With a list of `k` frequencies: a number, a list of `k` (one per frequency, the same on every joint), or a table
+        `amplitude[joint][frequency]` of `n` rows of `k`. Amplitudes in rad, phases in rad.
+    omega : number or list
+        The angular frequency, or the list of the `k` frequencies (rad/s).
+    offset : number or list
+        Constant offset per joint (rad).
+    """
+    w = as_array(omega, "trajectory.omega")
+    if w.ndim > 1 or w.size == 0:
+        raise ConfigError("trajectory.omega", f"expected a number or a list of frequencies, got shape {w.shape}")
+    per_frequency = w.ndim == 1
+    w = w.reshape(-1)
+    tables = [_term_table(value, w.shape[0], n, f"trajectory.{name}", per_frequency)
+              for name, value in (("amplitude", amplitude), ("phase", phase))]
+    return SumOfSines(tables[0], np.repeat(w[:, None], n, axis=1), tables[1], as_vector(offset, n, "trajectory.offset"))
+
+
+def _term_table(value: Any, k: int, n: int, field: str, per_frequency: bool) -> Array:
+    """A `(k, n)` table of terms from a number, a list (per frequency with a list of frequencies, else per joint) or an
+    `n`×`k` table `[joint][frequency]`."""
     arr = as_array(value, field)
-    if arr.ndim == 1 and arr.shape[0] == k:
-        arr = arr[:, None]
-    if arr.ndim > 2 or (arr.ndim == 2 and arr.shape[0] not in (1, k)) or (arr.ndim >= 1 and arr.shape[-1] not in (1, n)):
-        raise ConfigError(field, f"expected a number, a list of {k} values (one per term) or a {k}x{n} table, "
-                          f"got shape {arr.shape}")
-    return np.broadcast_to(arr, (k, n)).copy()
+    if arr.ndim == 0:
+        return np.full((k, n), float(arr))
+    if arr.ndim == 1:
+        size, what = (k, "frequency") if per_frequency else (n, "joint")
+        if arr.shape[0] != size:
+            raise ConfigError(field, f"a list gives one value per {what}: expected {size}, got {arr.shape[0]}"
+                              + (" (with omega a list, a list here is per frequency; per joint: a table of "
+                                 f"{n} rows of {k})" if per_frequency and arr.shape[0] == n else ""))
+        return np.broadcast_to(arr[:, None] if per_frequency else arr[None, :], (k, n)).copy()
+    if arr.shape != (n, k):
+        hint = " (transpose it: rows are joints)" if arr.shape == (k, n) else ""
+        raise ConfigError(field, f"a table is {field.rsplit('.', 1)[-1]}[joint][frequency]: {n} rows of {k}, got shape "
+                          f"{arr.shape}{hint}")
+    return arr.T.copy()
 
 
 def sinusoid(n: int, amplitude: Any = 1.0, omega: Any = 1.0, phase: Any = 0.0, offset: Any = 0.0) -> SumOfSines:

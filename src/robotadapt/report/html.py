@@ -1,6 +1,6 @@
 """Reports a user looks at: the comparison of controllers on one scenario (report.html, figures embedded), the gallery
 of the book's examples (index.html over the figures `robotadapt run` writes), and the α(t0) figure of the persistency of
-excitation analysis (spec §5).
+excitation analysis (§6.5; docs/laws.md#persistency-of-excitation).
 
 The comparison answers the book's open question (the comparison of the laws "remains to be investigated"): every
 controller of chapters 6–7 on the same arm, desired trajectory, disturbance, initial state and step, each with the gains

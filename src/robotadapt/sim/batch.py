@@ -65,9 +65,13 @@ def _same(a: Any, b: Any) -> bool:
     if type(a) is not type(b):
         return False
     if is_dataclass(a):
-        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in fields(a))
+        return all(_same(getattr(a, f.name), getattr(b, f.name)) for f in fields(a) if f.compare)
     if isinstance(a, np.ndarray):
         return a.shape == b.shape and bool(np.array_equal(a, b))
+    if isinstance(a, tuple | list):  # e.g. a model's per-joint tables
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
     return bool(a == b)
 
 

@@ -38,7 +38,7 @@ REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
     },
     "trajectory": {
         "sinusoid": ("trajectories:sinusoid", "n"),
-        "sum_of_sines": ("trajectories:SumOfSines.make", "n"),
+        "sum_of_sines": ("trajectories:sum_of_sines", "n"),
         "exponential_step": ("trajectories:exponential_step", "n"),
         "quintic": ("trajectories:quintic", "n"),
         "constant": ("trajectories:constant", "n"),
@@ -113,7 +113,7 @@ def _signature(ctor: Callable[..., Any], first: str | None) -> dict[str, Any]:
     """The constructor's keyword names (less its first argument) → default value, or REQUIRED."""
     if is_dataclass(ctor):
         names = {f.name: f.default if f.default is not MISSING else
-                 f.default_factory() if f.default_factory is not MISSING else REQUIRED  # type: ignore[misc]
+                 f.default_factory() if f.default_factory is not MISSING else REQUIRED
                  for f in fields(ctor) if not f.metadata.get("internal")}
     else:
         sig = inspect.signature(ctor)
@@ -171,7 +171,8 @@ def per_parameter(value: Any, model: RobotModel, field: str, *, broadcast: bool)
     if arr.ndim == 0 and broadcast:
         return np.full(model.p, float(arr))
     if arr.shape != (model.p,):
-        got = f"{arr.shape[0]} numbers" if arr.ndim == 1 else "a number" if arr.ndim == 0 else f"shape {arr.shape}"
+        got = (f"{arr.shape[0]} number{'s' if arr.shape[0] != 1 else ''}" if arr.ndim == 1 else
+               "a number" if arr.ndim == 0 else f"shape {arr.shape}")
         raise ConfigError(field, f"expected a list of {model.p} numbers, one per parameter in the order "
                           f"{_names(model.param_names)}; got {got}")
     return arr
