@@ -244,3 +244,18 @@ def test_a_repetitive_batch_with_a_run_that_stops_keeps_its_delay_lines_apart():
         assert_same_run(batch.run(i), simulate(s.plant, s.controller, s.trajectory, q0=q0[i], **kw))
     frozen = batch.z[batch.n_logged[1] :, 1]
     assert np.all(frozen == frozen[0])
+
+
+def test_models_built_per_run_with_tables_stack_into_one_batch():
+    """A sweep builds each run's scenario, so each run has its own (equal) model object; a model with per-joint tables
+    and cached constants (the kinematic tree of a URDF arm) is recognised as the same and the runs batch."""
+    pytest.importorskip("pinocchio")
+    from robotadapt.studies.scenarios import load
+
+    setups = [load("panda-slotine-li", ["simulation.t_final=0.003", f"controller.Gamma={g}"]).setup for g in (5.0, 40.0)]
+    assert setups[0].controller.model is not setups[1].controller.model
+    batch = simulate_batch([s.plant for s in setups], [s.controller for s in setups], setups[0].trajectory,
+                           t_final=0.003, integrator=RK4(1e-3, "numpy"), q0=np.stack([s.q0 for s in setups]))
+    for i, s in enumerate(setups):
+        single = simulate(s.plant, s.controller, s.trajectory, t_final=0.003, integrator=RK4(1e-3, "numpy"), q0=s.q0)
+        np.testing.assert_allclose(batch.run(i).x, single.x, rtol=1e-12, atol=1e-14)
