@@ -59,7 +59,7 @@ def test_every_packaged_scenario_loads_builds_and_runs(name):
     # A few steps run cleanly (but where a scenario shows a divergence on purpose), and what is kept is finite.
     res = load(name, ["simulation.t_final=0.02"]).run()
     if name in DIVERGES_ON_PURPOSE:
-        assert res.status.startswith("diverged at t="), res.status
+        assert res.status.startswith("diverged "), res.status  # "at t=…" or "within the step from 0 to dt s"
     else:
         assert res.status == "ok", res.status
     assert res.t.shape[0] == res.q.shape[0] == res.tau.shape[0] >= 1
