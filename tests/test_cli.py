@@ -266,3 +266,13 @@ def test_the_books_name_inertia_related_builds_the_slotine_li_law():
     assert "scenario" not in [e.name for e in entries]  # it is the lineup's slotine_li, not another law
     with pytest.raises(ConfigError, match="inertia_related.*slotine_li"):
         load("example-6.3.1", ["controller.kind='magic'"])
+
+
+def test_progress_bars_only_on_a_terminal(tmp_path):
+    """A run long enough to show a progress bar (numpy, 4 s) prints none when stderr is a file or a pipe."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "robotadapt", "run", "example-6.3.1", "--backend", "numpy", "--t-final",
+                           "4", "--no-plots", "--out", str(tmp_path)], capture_output=True, text=True, check=True)
+    assert done.stderr == ""
