@@ -359,7 +359,8 @@ def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any,
         n_logged[list(why)] = k_log
         alive[list(why)] = False
 
-    with tqdm(total=n_steps, delay=1.0, disable=not (progress and sys.stderr.isatty()), unit="step", leave=False, file=sys.stderr) as bar, \
+    quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
+    with tqdm(total=n_steps, delay=1.0, disable=quiet, unit="step", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
         for k in range(n_steps):
             j = k % m_max

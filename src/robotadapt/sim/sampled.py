@@ -306,7 +306,8 @@ def _run(tick: Tick, carry: Carry, traj: Trajectory, n_ticks: int, log_every: in
     n_log = n_ticks // log_every + 1
     logs = Record(*(np.empty((n_log, width)) for width in (carry.s.size + carry.x.size,) + (tick.loop.n,) * 4))
     k_log, status, start = 0, "ok", 0
-    with tqdm(total=n_ticks + 1, delay=1.0, disable=not (progress and sys.stderr.isatty()), unit="tick", leave=False, file=sys.stderr) as bar, \
+    quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
+    with tqdm(total=n_ticks + 1, delay=1.0, disable=quiet, unit="tick", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
         while status == "ok" and start <= n_ticks:
             count = min(CHUNK, n_ticks + 1 - start)

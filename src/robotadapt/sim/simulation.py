@@ -38,7 +38,8 @@ def _rk4(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int,
 
     z_log = np.empty((n_steps // log_every + 1,) + z0.shape)
     z, k_log, status = z0, 0, "ok"
-    with tqdm(total=n_steps, delay=1.0, disable=not (progress and sys.stderr.isatty()), unit="step", leave=False, file=sys.stderr) as bar, \
+    quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
+    with tqdm(total=n_steps, delay=1.0, disable=quiet, unit="step", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
         for start in range(0, n_steps, CHUNK):
             m = min(CHUNK, n_steps - start)

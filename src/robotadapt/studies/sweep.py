@@ -370,7 +370,8 @@ def run_sweep(sweep: Sweep, out: str | os.PathLike[str], *, workers: int | None 
     with _executor(workers or os.cpu_count() or 1, scheduler) as (slots, run):
         size = chunk_size(len(pending), slots, base)
         jobs = [(sweep.data, pending[i : i + size]) for i in range(0, len(pending), size)]
-        with tqdm(total=len(pending), disable=not (progress and sys.stderr.isatty()), unit="run", file=sys.stderr, smoothing=0) as bar:
+        quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
+        with tqdm(total=len(pending), disable=quiet, unit="run", file=sys.stderr, smoothing=0) as bar:
             for rows, how in run(jobs):
                 _append(table, rows)
                 done.update((row["run"], row) for row in rows)
