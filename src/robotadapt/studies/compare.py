@@ -52,7 +52,7 @@ LINEUP: dict[str, Contender] = {
                             {"kind": "pd_gravity", "Kp": 25.0, "Kv": 10.0, "phi_hat0": NOMINAL}),
     "adaptive_computed_torque": Contender(
         "adaptive computed torque + projection", "Table 6.2.1",
-        "Example 6.2.2; box [0.1, 10] of spec §2.3; φ̂(0) = 1.1 φ",
+        "Example 6.2.2; box [0.1, 10] (docs: laws.md#adaptive-computed-torque); φ̂(0) = 1.1 φ",
         {"kind": "adaptive_computed_torque", "Kp": 125.0, "Kv": 50.0, "Gamma": 500.0, "phi_hat0": NOMINAL,
          "phi_min": 0.1, "phi_max": 10.0}),
     "passivity": Contender("passivity: PID servo + gradient", "Table 6.4.1, Examples 6.4.1, 6.4.3", "Problem 6.4-1",
