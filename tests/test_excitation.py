@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import re
 
 import numpy as np
 import pytest
@@ -130,3 +131,53 @@ def test_pe_command_bad_window_exits_2_with_one_line(tmp_path, capsys, window):
     assert main(["pe", "example-6.3.1", "--window", window, "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("robotadapt: error: window:")
+
+
+# --- issue 16, item 4: the verdict in base parameters for an arm with unidentifiable directions ----------------------
+
+PLANAR3 = ["--set", "robot={kind='planar', n_links=3}", "--set", "plant={q0=[0.0, 0.0, 0.0], dq0=[0.0, 0.0, 0.0]}",
+           "--set", "controller.phi_hat0={scale=0.7}", "--t-final", "13", "--no-plots"]
+
+
+def stacked_rank(model, count: int = 40, seed: int = 3) -> int:
+    """Rank of Y over random states by numpy alone: the directions any trajectory could excite."""
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-np.pi, np.pi, (count, model.n))
+    dq, v, a = rng.standard_normal((3, count, model.n))
+    Y = model.regressor(q, dq, v, a).reshape(-1, model.p)
+    return int(np.linalg.matrix_rank(Y / np.linalg.norm(Y, axis=0).clip(1e-300), tol=1e-8 * np.sqrt(Y.shape[0])))
+
+
+def test_pe_on_a_three_link_planar_arm_speaks_of_base_parameters(tmp_path, capsys):
+    from robotadapt.robots import base_parameters
+    from robotadapt.studies.scenarios import load
+
+    model = load("example-6.3.1", [PLANAR3[1], PLANAR3[3], PLANAR3[5]]).setup.controller.model
+    rank = stacked_rank(model)
+    code, verdict = pe_json("example-6.3.1", *PLANAR3, "--out", str(tmp_path))
+    assert code == 0 and model.p == 30 and rank == 9
+    assert verdict["parameters"] == "base" and verdict["standard_parameters"] == 30
+    assert verdict["unidentifiable_directions"] == model.p - rank
+    assert verdict["param_names"] == list(base_parameters(model).names) and len(verdict["param_names"]) == rank
+    assert list(verdict["weakest_direction"]) == verdict["param_names"] and len(verdict["eigenvalues_worst"]) == rank
+    assert verdict["rank_worst"] <= rank
+    assert main(["pe", "example-6.3.1", *PLANAR3, "--out", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert f"for the {rank} base parameters (" in text
+    assert re.search(rf"rank \d+ of {rank} identifiable \(21 of 30 standard directions unidentifiable by construction\)",
+                     text)
+    assert "Ixx1" not in text  # an inertia no planar motion can show is not listed
+
+
+def test_base_false_keeps_the_standard_parameters():
+    from robotadapt.studies.scenarios import load
+
+    s = load("example-6.3.1", [PLANAR3[1], PLANAR3[3], PLANAR3[5], "simulation.t_final=13.0"]).setup
+    exc = excitation(s.controller.model, s.trajectory, s.t_final, base=False)
+    assert len(exc.param_names) == 30 and exc.unidentifiable == 0 and exc.as_dict()["parameters"] == "standard"
+    assert exc.rank <= stacked_rank(s.controller.model)
+
+
+def test_the_two_link_verdict_is_unchanged_by_the_base_analysis():
+    exc = excitation(TwoLinkArm(), sinusoid(2), horizon=10.0)
+    assert exc.param_names == ("m1", "m2") and exc.unidentifiable == 0 and exc.standard_parameters is None

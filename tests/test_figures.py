@@ -250,3 +250,24 @@ def test_sweep_summary_prints_four_significant_digits(tmp_path, capsys):
     assert best is not None, line
     for value in best.group(1).split(", "):
         assert len(value.replace(".", "").replace("-", "").lstrip("0")) <= 4, line
+
+
+def test_parameters_figure_of_a_three_link_planar_arm_shows_base_parameters():
+    """Issue 16, item 4: the figure plots what the dynamics see, ‖K(φ − φ̂)‖/‖Kφ‖, and counts the hidden directions."""
+    scenario = load("example-6.3.1", ["robot={kind='planar', n_links=3}", "plant={q0=[0.0, 0.0, 0.0], dq0=[0.0, 0.0, 0.0]}",
+                                      "controller.phi_hat0={scale=0.7}", "simulation.t_final=0.1",
+                                      "simulation.backend='numpy'"])
+    model = scenario.setup.controller.model
+    res = scenario.run()
+    fig = figures.parameters_figure(res, "planar3", model)
+    assert "21 of 30 directions unidentifiable" in fig._suptitle.get_text()
+    (ax,) = fig.axes
+    (line,) = ax.get_lines()
+    assert line.get_label() == "9 base parameters"
+    from robotadapt.robots import base_parameters
+
+    K = base_parameters(model).K
+    expected = np.linalg.norm((res.phi - res.phi_hat) @ K.T, axis=-1) / np.linalg.norm(K @ res.phi)
+    np.testing.assert_allclose(line.get_ydata(), np.maximum(expected, line.get_ydata().min()), rtol=1e-12)
+    plain = figures.parameters_figure(res, "planar3")  # without the model: the standard relative error, as before
+    assert "unidentifiable" not in plain._suptitle.get_text()

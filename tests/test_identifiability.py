@@ -173,3 +173,81 @@ def test_bad_arguments_name_the_field(kwargs, field):
     with pytest.raises(ConfigError) as info:
         base_parameters(PinocchioArm.example("ur5"), **kwargs)
     assert info.value.field == field
+
+
+# --- issue 16, item 4: a run's metrics and summary in base parameters -------------------------------------------------
+
+PLANAR3 = ["robot={kind='planar', n_links=3}", "plant={q0=[0.0, 0.0, 0.0], dq0=[0.0, 0.0, 0.0]}",
+           "controller.phi_hat0={scale=0.7}", "simulation.t_final=0.2", "simulation.backend='numpy'"]
+
+
+def independent_rank(model, count: int = 40, seed: int = 7) -> int:
+    """The rank of Y stacked over random states, by numpy alone (not base_parameters)."""
+    q, dq, v, a = fresh_states(model, count, seed)
+    Y = model.regressor(q, dq, v, a).reshape(-1, model.p)
+    return int(np.linalg.matrix_rank(Y / np.linalg.norm(Y, axis=0).clip(1e-300), tol=1e-8 * np.sqrt(Y.shape[0])))
+
+
+def test_three_link_planar_run_metrics_and_summary_speak_of_base_parameters():
+    from robotadapt.analysis.metrics import metrics
+    from robotadapt.cli.common import summary
+    from robotadapt.studies.scenarios import load
+
+    scenario = load("example-6.3.1", PLANAR3)
+    model = scenario.setup.controller.model
+    res = scenario.run()
+    m = metrics(res, model)
+    for key in ("final_abs_error", "rms_error", "max_abs_torque", "final_phi_hat", "status", "final_phi_error"):
+        assert key in m
+    rank = independent_rank(model)
+    assert model.p == 30 and rank == 9
+    assert m["base_parameters"] == rank and len(m["base_param_names"]) == rank
+    assert m["unidentifiable_directions"] == model.p - rank == 21
+    basis = base_parameters(model)
+    err = basis.K @ (res.phi - res.phi_hat[-1])
+    assert m["final_base_phi_error"] == pytest.approx(np.linalg.norm(err), rel=1e-12)
+    assert m["final_base_phi_error_relative"] == pytest.approx(np.linalg.norm(err) / np.linalg.norm(basis.K @ res.phi))
+    line = summary("planar3", m)
+    assert "21 of 30 directions unidentifiable" in line and "‖K(φ − φ̂)‖/‖Kφ‖" in line and "9 base parameters" in line
+    plain = metrics(res)  # without the model: the standard keys alone, unchanged
+    assert "unidentifiable_directions" not in plain and plain["final_phi_error"] == m["final_phi_error"]
+
+
+def test_the_book_arms_get_no_base_keys_and_are_not_sampled():
+    from robotadapt.analysis.metrics import base_of, metrics
+    from robotadapt.studies.scenarios import load
+
+    scenario = load("example-6.3.1", ["simulation.t_final=0.05"])
+    model = scenario.setup.controller.model
+    assert base_of(model) is None  # p = n = 2: skipped without sampling
+    m = metrics(scenario.run(), model)
+    assert "unidentifiable_directions" not in m and "base_parameters" not in m
+
+
+def test_base_parameters_are_computed_once_per_model(monkeypatch):
+    from robotadapt.analysis import metrics as metrics_module
+    from robotadapt.robots import identifiability
+
+    model = chain(3, [0.0, 0.0, -9.81], general=False, seed=3)
+    calls = []
+    real = identifiability.base_parameters
+    monkeypatch.setattr(identifiability, "base_parameters", lambda m, *a, **k: calls.append(m) or real(m, *a, **k))
+    first = metrics_module.base_of(model)
+    assert first is not None and metrics_module.base_of(model) is first and len(calls) == 1
+
+
+def test_robotadapt_run_reports_base_parameters(tmp_path, capsys):
+    """`robotadapt run` on a 3-link planar arm: metrics.json and the summary line speak of the 9 base parameters and the
+    21 directions the dynamics cannot see (counted here by an independent rank)."""
+    import json
+
+    from robotadapt.cli import main
+    from robotadapt.studies.scenarios import load
+
+    args = [a for o in PLANAR3 for a in ("--set", o)]
+    assert main(["run", "example-6.3.1", *args, "--no-plots", "--out", str(tmp_path)]) == 0
+    model = load("example-6.3.1", PLANAR3).setup.controller.model
+    rank = independent_rank(model)
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    assert m["base_parameters"] == rank and m["unidentifiable_directions"] == model.p - rank
+    assert f"{model.p - rank} of {model.p} directions unidentifiable" in capsys.readouterr().out

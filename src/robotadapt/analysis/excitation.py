@@ -14,6 +14,12 @@ It also evaluates the infinite-integral condition of composite adaptation (6.6.1
 along the desired trajectory (W_f → f * Y_d as e → 0): the exponent k of λ_min ∝ t^k over the second half of the
 horizon (k = 1 under PE; k = 0 when the integral levels off). It counts as growing when k ≥ 0.1.
 
+For a model whose dynamics see fewer combinations than its p standard parameters (an n-DOF arm, p_b < p: see
+:mod:`robotadapt.robots.identifiability`), no trajectory excites the p − p_b directions that no state does, so the
+analysis is made in the base parameters φ_b = K φ (Y_b, the independent columns of Y): the rank is stated against p_b,
+the names and the weakest direction are the base parameters', and `unidentifiable` counts the p − p_b directions lost
+by construction (`base=False` keeps the standard parameters).
+
 Quadrature: composite Simpson on a uniform grid of `INTERVALS_PER_WINDOW` sub-intervals per window, summed over blocks
 of ρ/`WINDOWS_PER_PERIOD` (the t0 step), so each window is a sum of positive semidefinite block integrals: no
 cancellation, and a rank-deficient window keeps λ_min at round-off relative to its own λ_max.
@@ -62,7 +68,8 @@ class Excitation:
     `t0, alpha, beta`: the window starts and λ_min, λ_max of each window (λ_min clipped at 0: a Gram matrix is positive
     semidefinite, negative values are round-off). `eigenvalues`, `weakest`: the spectrum and the unit eigenvector of
     λ_min in the weakest window, sign chosen so its largest entry is positive. `t_cum, lambda_min_cum, lambda_max_cum`:
-    the extreme eigenvalues of ∫_0^t Y_dᵀ Y_d at the block ends.
+    the extreme eigenvalues of ∫_0^t Y_dᵀ Y_d at the block ends. `standard_parameters` is the model's p and
+    `param_names` the analysed parameters: its base parameters when it has fewer (then `unidentifiable` = p − p_b > 0).
     """
 
     param_names: tuple[str, ...]
@@ -78,6 +85,12 @@ class Excitation:
     t_cum: Array
     lambda_min_cum: Array
     lambda_max_cum: Array
+    standard_parameters: int | None = None
+
+    @property
+    def unidentifiable(self) -> int:
+        """p − p_b: the standard directions no trajectory can excite (0 when analysed in the standard parameters)."""
+        return 0 if self.standard_parameters is None else self.standard_parameters - len(self.param_names)
 
     @property
     def alpha_min(self) -> float:
@@ -138,6 +151,9 @@ class Excitation:
             "threshold": self.rtol * self.beta_max,
             "rtol": self.rtol,
             "param_names": list(self.param_names),
+            "parameters": "base" if self.unidentifiable else "standard",
+            "standard_parameters": len(self.param_names) + self.unidentifiable,
+            "unidentifiable_directions": self.unidentifiable,
             "infinite_integral": {"lambda_min_final": float(self.lambda_min_cum[-1]),
                                   "lambda_max_final": float(self.lambda_max_cum[-1]),
                                   "growth_exponent": self.growth_exponent, "grows": self.integral_grows},
@@ -159,9 +175,18 @@ def default_window(trajectory: Trajectory, horizon: float) -> tuple[float, str]:
 
 
 def excitation(model: RobotModel, trajectory: Trajectory, horizon: float, window: float | None = None,
-               rtol: float = RTOL) -> Excitation:
+               rtol: float = RTOL, base: bool = True) -> Excitation:
     """Windowed Gram matrices ∫_{t0}^{t0+ρ} Y_dᵀ Y_d dt (6.5.2) for t0 = 0, ρ/32, … up to `horizon` − ρ, and the
-    growing integral ∫_0^t Y_dᵀ Y_d (6.6.18) up to `horizon` (s). `window` ρ defaults to :func:`default_window`."""
+    growing integral ∫_0^t Y_dᵀ Y_d (6.6.18) up to `horizon` (s). `window` ρ defaults to :func:`default_window`.
+    With `base` (default), a model with unidentifiable directions is analysed in its base parameters (module doc)."""
+    standard = None
+    if base:
+        from ..robots.identifiability import BaseParameterModel
+        from .metrics import base_of
+
+        basis = base_of(model)
+        if basis is not None:
+            model, standard = BaseParameterModel(basis), basis.K.shape[1]
     horizon = as_scalar(horizon, "horizon", positive=True)
     rtol = as_scalar(rtol, "rtol", positive=True, maximum=1.0)
     if window is None:
@@ -185,4 +210,4 @@ def excitation(model: RobotModel, trajectory: Trajectory, horizon: float, window
         param_names=tuple(model.param_names), window=float(window), window_source=source, horizon=float(horizon),
         rtol=rtol, t0=block * np.arange(n_windows), alpha=np.maximum(lam[:, 0], 0.0), beta=lam[:, -1],
         eigenvalues=np.maximum(lam[worst], 0.0), weakest=weakest, t_cum=block * np.arange(1, n_blocks + 1),
-        lambda_min_cum=np.maximum(lam_cum[:, 0], 0.0), lambda_max_cum=lam_cum[:, -1])
+        lambda_min_cum=np.maximum(lam_cum[:, 0], 0.0), lambda_max_cum=lam_cum[:, -1], standard_parameters=standard)

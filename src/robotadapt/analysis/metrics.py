@@ -7,7 +7,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from ..robots.base import RobotModel
+    from ..robots.identifiability import BaseParameters
     from ..sim.result import SimulationResult
+
+#: base parameters by model identity: id → (the model, kept alive so the id stays its own; its base parameters or None)
+_BASES: dict[int, tuple[Any, BaseParameters | None]] = {}
 
 
 def _list(a: Any) -> Any:
@@ -21,14 +26,51 @@ def lyapunov_increase(V: np.ndarray) -> float:
     return float(max(np.max(np.diff(V)), 0.0) / max(float(V[0]), 1e-12))
 
 
-def metrics(res: SimulationResult) -> dict[str, Any]:
+def base_of(model: RobotModel | None) -> BaseParameters | None:
+    """The base parameters of `model` (:func:`robotadapt.robots.base_parameters`) when it has fewer than its p standard
+    parameters, else None; computed once per model object. Models with no more parameters than joints (the book's
+    arms: the two-link arm's m1, m2) are skipped without sampling: their columns are taken as independent."""
+    if model is None or model.p <= model.n:
+        return None
+    hit = _BASES.get(id(model))
+    if hit is None or hit[0] is not model:
+        from ..robots.identifiability import base_parameters
+
+        basis = base_parameters(model)
+        hit = (model, basis if basis.count < model.p else None)
+        _BASES[id(model)] = hit
+    return hit[1]
+
+
+def base_metrics(res: SimulationResult, model: RobotModel | None) -> dict[str, Any]:
+    """For a model with unidentifiable directions (p_b < p): `base_parameters` p_b, `base_param_names`,
+    `unidentifiable_directions` p − p_b, and when the truth is known `final_base_phi_error` ‖K(φ − φ̂)‖ at the end and
+    `final_base_phi_error_relative` ‖K(φ − φ̂)‖ / ‖K φ‖ (what the dynamics can see of the estimate's error). Empty
+    otherwise, or when `model` is not the run's controller model (another parameter count)."""
+    basis = base_of(model)
+    if basis is None or res.phi_hat.shape[-1] != basis.K.shape[1]:
+        return {}
+    out: dict[str, Any] = {"base_parameters": basis.count, "base_param_names": list(basis.names),
+                           "unidentifiable_directions": basis.K.shape[1] - basis.count}
+    truth = res.phi_true
+    if truth is not None:
+        err = float(np.linalg.norm(basis.base(truth[-1] - res.phi_hat[-1])))
+        size = float(np.linalg.norm(basis.base(truth[-1])))
+        out["final_base_phi_error"] = err
+        out["final_base_phi_error_relative"] = err / size if size > 0 else None
+    return out
+
+
+def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str, Any]:
     """Per-joint tracking metrics, torque and energy, final estimate, parameter error and Lyapunov monitor.
 
     `final_abs_error` is |e| at the last logged instant, per joint; `rms_error` the RMS of e over the logged samples,
     **per joint**: √(mean_k e_i(t_k)²), one entry per joint (rad or m); `rms_error_norm` the one scalar
     √(mean_k ‖e(t_k)‖²) = √(Σ_i rms_error_i²), what `robotadapt compare` tabulates as "RMS ‖e‖"; `max_abs_torque`
     max |τ| per joint; `control_energy` ∫ τᵀτ dt; `final_phi_error` ‖φ − φ̂‖ at the end when the truth is known;
-    `lyapunov_max_rel_increase` the largest step increase of V relative to V(0).
+    `lyapunov_max_rel_increase` the largest step increase of V relative to V(0). With the controller's `model`, when
+    its dynamics see fewer combinations than its parameters (an n-DOF arm), also the base-parameter keys of
+    :func:`base_metrics`.
     """
     e, t, tau = res.e, res.t, res.tau
     out: dict[str, Any] = {
@@ -54,6 +96,7 @@ def metrics(res: SimulationResult) -> dict[str, Any]:
     if res.phi is not None:
         out["phi_true"] = _list(res.phi)
         out["final_phi_error"] = float(np.linalg.norm(res.phi - res.phi_hat[-1]))
+    out.update(base_metrics(res, model))
     if res.V is not None:
         out["V_initial"] = float(res.V[0])
         out["V_final"] = float(res.V[-1])

@@ -38,10 +38,17 @@ MAX_SUMMARY_PARAMETERS = 6
 
 
 def summary(name: str, m: dict[str, Any]) -> str:
-    """One line: status, final and RMS error, final estimate (its error ‖φ̃‖ for many parameters)."""
+    """One line: status, final and RMS error, final estimate (its error ‖φ̃‖ for many parameters; for a model with
+    unidentifiable directions, the base-parameter error ‖K φ̃‖/‖K φ‖ and how many directions the dynamics cannot see)."""
     head = (f"{name}: {m['status']}; t = {m['t_end']:.4g} s, final |e| = {fmt(m['final_abs_error'])}, "
             f"RMS e = {fmt(m['rms_error'])}")
     names = m["param_names"]
+    if "unidentifiable_directions" in m:  # an n-DOF arm: what the dynamics can see, the base parameters
+        hidden = f"{m['unidentifiable_directions']} of {len(names)} directions unidentifiable"
+        if m.get("final_base_phi_error_relative") is not None:
+            return (f"{head}, final ‖K(φ − φ̂)‖/‖Kφ‖ = {m['final_base_phi_error_relative']:.3g} over "
+                    f"{m['base_parameters']} base parameters, {hidden}")
+        return f"{head}, {m['base_parameters']} base parameters estimated, {hidden}"
     if len(names) <= MAX_SUMMARY_PARAMETERS:
         return f"{head}, final {', '.join(names)} = {fmt(m['final_phi_hat'])}"
     if "final_phi_error" in m:

@@ -38,14 +38,19 @@ def main(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(verdict))
         return 0
+    what = f"the {len(exc.param_names)} base parameters " if exc.unidentifiable else ""
     direction = ", ".join(f"{k} = {v:.4g}" for k, v in exc.weakest_direction.items())
     print(f"{scenario.name}: {'' if exc.persistently_exciting else 'NOT '}persistently exciting (6.5.2) for "
-          f"({', '.join(exc.param_names)}), windows of ρ = {exc.window:.6g} s ({exc.window_source}), "
+          f"{what}({', '.join(exc.param_names)}), windows of ρ = {exc.window:.6g} s ({exc.window_source}), "
           f"t0 from 0 to {exc.t0[-1]:.4g} s")
     print(f"  α = min λ_min = {exc.alpha_min:.6g}, β = max λ_max = {exc.beta_max:.6g}; "
           f"PE iff α ≥ {exc.rtol:g}·β = {exc.rtol * exc.beta_max:.3g}")
-    print(f"  weakest window t0 = {exc.t0_worst:.4g} s: eigenvalues {fmt(exc.eigenvalues.tolist())}, rank {exc.rank} of "
-          f"{len(exc.param_names)}; least excited direction {direction}")
+    rank = f"rank {exc.rank} of {len(exc.param_names)}"
+    if exc.unidentifiable:
+        rank += (f" identifiable ({exc.unidentifiable} of {exc.standard_parameters} standard directions unidentifiable "
+                 "by construction)")
+    print(f"  weakest window t0 = {exc.t0_worst:.4g} s: eigenvalues {fmt(exc.eigenvalues.tolist())}, {rank}; "
+          f"least excited direction {direction}")
     print(f"  infinite-integral test (6.6.18): λ_min ∫_0^t Y_dᵀY_d = {exc.lambda_min_cum[-1]:.4g} at t = "
           f"{exc.t_cum[-1]:.4g} s, ∝ t^{exc.growth_exponent:.2f} over the second half: "
           f"{'grows without bound' if exc.integral_grows else 'levels off'}")

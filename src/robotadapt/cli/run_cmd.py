@@ -29,7 +29,7 @@ def _study(scenario: Any, out: Path, no_plots: bool) -> None:
     runs = run_study(scenario, progress=True)
     for group in runs.values():
         for run in group:
-            print(summary(f"  {run.key} = {run.value}", metrics(run.result)))
+            print(summary(f"  {run.key} = {run.value}", metrics(run.result, scenario.setup.controller.model)))
     atomic_write(out / "study.json", lambda f: json.dump(study_summary(runs), f, indent=2))
     if not no_plots:
         from ..report.figures import study
@@ -47,12 +47,13 @@ def main(args: argparse.Namespace) -> int:
     scenario = load(args.scenario, overrides(args))
     out = args.out if args.out is not None else Path("results") / scenario.name
     result = scenario.run(progress=True)
-    save_result(result, out, scenario.text)
+    model = scenario.setup.controller.model
+    save_result(result, out, scenario.text, model=model)
     if not args.no_plots:
         from ..report.figures import save_figures
 
         save_figures(result, out, title=scenario.name, model=scenario.setup.controller.model)
-    print(summary(scenario.name, metrics(result)))
+    print(summary(scenario.name, metrics(result, model)))
     if scenario.study:
         _study(scenario, out, args.no_plots)
     print(f"wrote {out}/")

@@ -216,11 +216,44 @@ def _many_parameters(res: SimulationResult, ax: Any) -> None:
         ax.set_ylabel(r"$\Vert\hat{\varphi}\Vert$ (mixed units)")
 
 
+def _base_parameters_figure(res: SimulationResult, title: str, basis: Any) -> Figure:
+    """What the dynamics see of the estimate: K φ̂(t) against K φ for up to `MAX_PARAMETER_LINES` base parameters, else
+    ‖K(φ − φ̂(t))‖ / ‖K φ‖ (‖K φ̂(t)‖ when the truth is unknown); the title counts the unidentifiable directions."""
+    b, p = basis.count, basis.K.shape[1]
+    fig, axes = _panels(1)
+    ax, truth, est = axes[0], res.phi_true, basis.base(res.phi_hat)
+    if b <= MAX_PARAMETER_LINES:
+        for i, name in enumerate(basis.names):
+            ax.plot(res.t, est[:, i], label=f"{name} (estimate)", color=style(i)["color"])
+            if truth is not None:
+                ax.plot(res.t, basis.base(truth)[:, i], color=style(i)["color"], linestyle="--", marker="o",
+                        markevery=0.1, markersize=4, markerfacecolor="none", label=f"{name} true")
+        ax.set_ylabel(r"$K\hat{\varphi}$" + (r", $K\varphi$" if truth is not None else "") + " (mixed units)")
+        what = r"base parameters $K\hat{\varphi}$" + (r" (solid), $K\varphi$ (dashed)" if truth is not None else "")
+    elif truth is not None:
+        rel = np.linalg.norm(basis.base(truth - res.phi_hat), axis=-1) / np.maximum(
+            np.linalg.norm(basis.base(truth), axis=-1), 1e-300)
+        ax.semilogy(res.t, positive(rel), label=f"{b} base parameters")
+        ax.set_ylabel(r"$\Vert K(\varphi - \hat{\varphi})\Vert \,/\, \Vert K\varphi\Vert$")
+        what = "base-parameter error"
+    else:
+        ax.plot(res.t, np.linalg.norm(est, axis=-1), label=f"{b} base parameters")
+        ax.set_ylabel(r"$\Vert K\hat{\varphi}\Vert$ (mixed units)")
+        what = "base-parameter estimates"
+    return _finish(fig, axes, _title(title, f"{what}; {p - b} of {p} directions unidentifiable"))
+
+
 def parameters_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
     """φ̂(t) solid, the true φ(t) dashed with markers in the same colour when known (both stay visible where they
     coincide); one panel per unit. For more than `MAX_PARAMETER_LINES` parameters (n-DOF arms) the relative error
-    ‖φ̃(t)‖ / ‖φ(t)‖ when the truth is known, else ‖φ̂(t)‖."""
+    ‖φ̃(t)‖ / ‖φ(t)‖ when the truth is known, else ‖φ̂(t)‖. When `model` (the controller's) has unidentifiable directions
+    (fewer base than standard parameters), the base parameters K φ̂ instead: the figure shows what the dynamics see."""
+    from ..analysis.metrics import base_of
+
     names, truth = res.param_names, res.phi_true
+    basis = base_of(model) if model is not None else None
+    if basis is not None and basis.K.shape[1] == len(names):
+        return _base_parameters_figure(res, title, basis)
     if not names or len(names) > MAX_PARAMETER_LINES:
         fig, axes = _panels(1)
         if names:

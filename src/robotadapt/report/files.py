@@ -14,13 +14,15 @@ from ..files import atomic_write, writable_dir
 from ..sim.result import SimulationResult
 
 
-def save_result(result: SimulationResult, directory: str | os.PathLike[str], scenario_text: str | None = None) -> Path:
-    """Write `result.npz`, `metrics.json` (:func:`robotadapt.analysis.metrics.metrics`) and, if given, `scenario.toml`
-    into `directory`, each atomically; returns the folder."""
+def save_result(result: SimulationResult, directory: str | os.PathLike[str], scenario_text: str | None = None,
+                model: Any = None) -> Path:
+    """Write `result.npz`, `metrics.json` (:func:`robotadapt.analysis.metrics.metrics`, in base parameters too when the
+    controller's `model` is given and has unidentifiable directions) and, if given, `scenario.toml` into `directory`,
+    each atomically; returns the folder."""
     out = writable_dir(directory)
     arrays: dict[str, Any] = result.arrays()
     atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
-    atomic_write(out / "metrics.json", lambda f: json.dump(metrics(result), f, indent=2))
+    atomic_write(out / "metrics.json", lambda f: json.dump(metrics(result, model), f, indent=2))
     if scenario_text is not None:
         atomic_write(out / "scenario.toml", lambda f: f.write(scenario_text))
     return out
