@@ -1,4 +1,5 @@
-"""Persistency of excitation of a desired trajectory for a robot model (spec §5, (6.5.2); (6.6.18)).
+"""Persistency of excitation of a desired trajectory for a robot model (docs/laws.md#persistency-of-excitation,
+(6.5.2); (6.6.18)).
 
 Along the desired trajectory the regressor is Y_d(t) = Y(q_d, q̇_d, q̇_d, q̈_d) (`model.regressor`, shape `(n, p)`). The
 trajectory is persistently exciting (PE) when every window of length ρ sweeps all p parameter directions:

@@ -1,4 +1,4 @@
-"""Analysis of runs: tracking and parameter metrics, Lyapunov monitor (spec §11)."""
+"""Analysis of runs: tracking and parameter metrics, Lyapunov monitor (the laws' proofs, docs/laws.md)."""
 
 from __future__ import annotations
 

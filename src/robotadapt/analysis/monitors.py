@@ -1,4 +1,5 @@
-"""Monitors of a run against its stability proof (spec §11): the sign of dV/dt, the passivity integral (6.4.4) against
+"""Monitors of a run against its stability proof (docs/laws.md, the laws' proofs): the sign of dV/dt, the passivity
+integral (6.4.4) against
 its bound −β, λ_min(P⁻¹) for least squares (6.6.27), ‖φ̃‖ when the truth is known, and the time the error takes to
 converge.
 

@@ -1,4 +1,5 @@
-"""`robotadapt pe`: is the scenario's desired trajectory persistently exciting for its model? (spec §5, (6.5.2))"""
+"""`robotadapt pe`: is the scenario's desired trajectory persistently exciting for its model?
+(docs/laws.md#persistency-of-excitation, (6.5.2))"""
 
 from __future__ import annotations
 

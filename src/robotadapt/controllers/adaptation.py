@@ -1,4 +1,5 @@
-"""Parameter update laws as parts a controller composes (spec §4.2, §4.5, §7.3).
+"""Parameter update laws as parts a controller composes (docs/laws.md#gradient, docs/laws.md#landau-pi,
+docs/laws.md#sigma-modification).
 
 A law sees the passivity output y = Zᵀ r of its controller (Z the regressor, r the filtered error) and keeps its own
 state `xa` (shape `(..., state_size)`):
@@ -46,7 +47,7 @@ class UpdateLaw(Protocol):
 
 @dataclass(frozen=True, eq=False)
 class Gradient:
-    """Gradient law of Example 6.4.1: dφ̂/dt = Γ Zᵀ r. Passive with β = ½ φ̃(0)ᵀ Γ⁻¹ φ̃(0) (spec §4.2)."""
+    """Gradient law of Example 6.4.1: dφ̂/dt = Γ Zᵀ r. Passive with β = ½ φ̃(0)ᵀ Γ⁻¹ φ̃(0) (docs/laws.md#gradient)."""
 
     p: int
     Gamma: Any
@@ -82,7 +83,7 @@ class LandauPI:
 
     φ̂ = φ̂_I + F_p Zᵀ r,   dφ̂_I/dt = K_I Zᵀ r,   φ̂_I(0) = φ̂(0).
 
-    State φ̂_I. Passive: ∫ −rᵀ Z φ̃ ≥ −½ φ̃_I(0)ᵀ K_I⁻¹ φ̃_I(0) (spec §4.5). F_p = 0 is the gradient law.
+    State φ̂_I. Passive: ∫ −rᵀ Z φ̃ ≥ −½ φ̃_I(0)ᵀ K_I⁻¹ φ̃_I(0) (docs/laws.md#landau-pi). F_p = 0 is the gradient law.
     """
 
     p: int
@@ -123,7 +124,7 @@ class SwitchingSigma:
 
     with S = I (the book's form, σ0 = 1) or S = Γ (`scaled = true`, Ioannou's form). φ0 > ‖φ‖ is an a-priori bound on
     the true parameters (6.7.15). The leakage keeps φ̂ bounded under disturbances; the tracking error then only enters a
-    residual set (spec §7.3).
+    residual set (docs/laws.md#sigma-modification).
     """
 
     p: int

@@ -1,4 +1,4 @@
-"""The controller contract and the error signals every law shares (spec §0.2, §3.2).
+"""The controller contract and the error signals every law shares (docs/laws.md#model, docs/laws.md#slotine-li).
 
 A controller holds only constants (model, gains, initial estimate). Its time-varying state `x` (φ̂, filter states,
 integrals) comes in and its derivative goes out::
@@ -92,7 +92,8 @@ class HasGuard(Protocol):
 
 @runtime_checkable
 class FiltersTorque(Protocol):
-    """A controller whose state filters the torque the plant receives (the composite law's τ_f = f * τ, spec §6.1).
+    """A controller whose state filters the torque the plant receives (the composite law's τ_f = f * τ,
+    docs/laws.md#composite).
 
     Its own derivative assumes the plant receives the torque it commands; where an actuator saturates, delays or
     rate-limits it, or a wrapper adds to it, the simulator passes the applied torque through `applied`."""

@@ -1,4 +1,5 @@
-"""Composite adaptive controller of Slotine & Li (spec §6, Table 6.6.1): tracking error and prediction error together."""
+"""Composite adaptive controller of Slotine & Li (docs/laws.md#composite, Table 6.6.1): tracking error and prediction
+error together."""
 
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ class Composite:
     dP/dt = λ(t) P − P W_fᵀ W_f P,   P(0) = P0                                  (6.6.17) (+ forgetting)
     V = ½ rᵀ M r + ½ φ̃ᵀ P⁻¹ φ̃,  dV/dt = −rᵀ K_v r − ½ ‖W_f φ̃‖² − ½ λ φ̃ᵀ P⁻¹ φ̃   (6.6.29), (6.6.33)
 
-    W_f needs no joint acceleration (spec §6.1): with the momentum regressor Y_h (Y_h φ = M q̇) and the remainder
+    W_f needs no joint acceleration (docs/laws.md#composite): with the momentum regressor Y_h (Y_h φ = M q̇) and the remainder
     regressor Y_g (Y_g φ = −V_mᵀ q̇ + G + F), one filter state gives
 
     dZ3/dt = −a Z3 + a² Y_h − a Y_g,   Z3(0) = a Y_h(q(0), q̇(0)),   W_f = a Y_h − Z3,
@@ -34,7 +35,8 @@ class Composite:
     and the applied torque u (τ itself unless an actuator or a wrapper changes it, :meth:`applied`) is filtered as
     dτ_f/dt = −a τ_f + a u, τ_f(0) = 0.
 
-    Forgetting (spec §6.3 "Optional variants", Slotine & Li 1989): λ(t) = `forgetting` (λ0 ≥ 0, 0 = the book's pure
+    Forgetting (docs/laws.md#composite "Optional variants", Slotine & Li 1989): λ(t) = `forgetting` (λ0 ≥ 0, 0 = the
+    book's pure
     least squares), or, with `k0`, the bounded-gain rule λ(t) = λ0 (1 − ‖P‖/k0), which keeps the spectral norm ‖P‖ ≤ k0.
 
     State x = [φ̂ (p), P (p×p, row-major), τ_f (n), Z3 (n×p, row-major)]. `a` > 0 is the filter pole (1/s); `P0` a
@@ -126,7 +128,8 @@ class Composite:
         return tau, dx
 
     def applied(self, dx: Array, tau: Array, u: Array) -> Array:
-        """dx/dt with dτ_f/dt = −a τ_f + a u for the torque u the plant receives (spec §6.1: the filtered torque is the
+        """dx/dt with dτ_f/dt = −a τ_f + a u for the torque u the plant receives (docs/laws.md#composite: the
+        filtered torque is the
         applied one, so that τ_f − W_f φ̂ = W_f φ̃ (6.6.15) holds under torque limits, delays and added terms)."""
         xp = array_namespace(dx, u)
         k, n = self.model.p * (self.model.p + 1), self.model.n

@@ -1,11 +1,12 @@
-"""Adaptive computed-torque controller of Craig, Hsu & Sastry (spec §2.2, Table 6.2.1).
+"""Adaptive computed-torque controller of Craig, Hsu & Sastry (docs/laws.md#adaptive-computed-torque, Table 6.2.1).
 
 The update law needs the measured joint acceleration q̈ and the inverse of the estimated mass matrix M̂(q), so the
 controller implements :class:`~robotadapt.controllers.base.NeedsAcceleration` (the simulator hands it the plant's q̈
 for the torque it just applied; the torque itself does not need q̈). Where M̂ loses definiteness the update raises
 :class:`~robotadapt.controllers.base.SimulationStop` on numpy arrays; a compiled run reads the law's guard
 (:class:`~robotadapt.controllers.base.HasGuard`) instead and stops there too, with the same status. An optional box
-projection of φ̂ keeps M̂ invertible (spec §2.2 "Projection"). The equations are written against the array API of their
+projection of φ̂ keeps M̂ invertible (docs/laws.md#adaptive-computed-torque "Projection"). The equations are written
+against the array API of their
 inputs, so numpy and JAX run the same code.
 """
 
@@ -50,7 +51,7 @@ class AdaptiveComputedTorque:
         The Lyapunov pair of (6.2.16); give at most one. From `Q`, P solves AᵀP + PA = −Q; a given `P` must make
         Q = −(AᵀP + PA) positive definite. With neither, scalar gains K_p = k_p I, K_v = k_v I take the book's
         P = [[(k_p + k_v/2) I, ½ I], [½ I, I]] (Example 6.2.2; then Q = diag(k_p I, (2k_v − 1) I), which needs
-        k_v > ½, spec §2.3) and other gains Q = I. `lyapunov_pair` gives the (P, Q) in use.
+        k_v > ½, docs/laws.md#adaptive-computed-torque) and other gains Q = I. `lyapunov_pair` gives the (P, Q) in use.
     phi_min, phi_max : scalar or (p,) array, optional
         A box for φ̂ (None: unbounded; `bounds` gives the box with ∓∞). Components of dφ̂/dt that point out of the box
         at (or beyond) a bound are set to zero, `project` clips the state after each fixed step, and the estimate in

@@ -1,4 +1,4 @@
-"""Desired compensation adaptation law of Sadegh & Horowitz (spec §8, Table 7.2.1)."""
+"""Desired compensation adaptation law of Sadegh & Horowitz (docs/laws.md#dcal, Table 7.2.1)."""
 
 from __future__ import annotations
 

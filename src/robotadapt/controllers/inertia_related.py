@@ -1,4 +1,4 @@
-"""Adaptive inertia-related controller of Slotine & Li (spec §3, Table 6.3.1)."""
+"""Adaptive inertia-related controller of Slotine & Li (docs/laws.md#slotine-li, Table 6.3.1)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The passivity-based class of adaptive controllers (Ortega & Spong; Brogliato, Landau & Lozano): spec §4, Table 6.4.1.
+"""The passivity-based class of adaptive controllers (Ortega & Spong; Brogliato, Landau & Lozano):
+docs/laws.md#passivity, Table 6.4.1.
 
 The servo filter is given by G(s) = K(s)/s (6.4.2), proper, in state space::
 

@@ -1,4 +1,4 @@
-"""Repetitive (learning) control law of Sadegh, Horowitz, Kao & Tomizuka (spec §9, Table 7.2.2)."""
+"""Repetitive (learning) control law of Sadegh, Horowitz, Kao & Tomizuka (docs/laws.md#repetitive, Table 7.2.2)."""
 
 from __future__ import annotations
 

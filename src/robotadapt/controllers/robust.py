@@ -1,4 +1,5 @@
-"""Torque-based disturbance rejection of Slotine & Li (1985c): an adaptive law plus k_d sgn(r) (spec §7.1–7.2; §6.7).
+"""Torque-based disturbance rejection of Slotine & Li (1985c): an adaptive law plus k_d sgn(r)
+(docs/laws.md#sign-robust–7.2; §6.7).
 
 With an additive bounded disturbance (6.7.1) the Slotine–Li Lyapunov function (6.3.7) only gives
 V̇ = −rᵀK_v r + rᵀT_d (6.7.2): r stays bounded but e no longer goes to zero and φ̂ may drift (Example 6.7.1). A
@@ -34,7 +35,8 @@ class SignRobust:
     r ∈ L2, e → 0, φ̂ bounded. `kd` is a scalar (the book) or one value per joint, each ≥ 0; `kd = 0` is the base.
 
     `boundary_layer` ε > 0 replaces sgn(r_i) by sat(r_i/ε) to soften the chattering of the switching torque. This
-    changes the theory (spec §7.2): inside the layer the term is only the linear k_d r_i/ε, so (6.7.11) becomes
+    changes the theory (docs/laws.md#sign-robust): inside the layer the term is only the linear k_d r_i/ε, so
+    (6.7.11) becomes
     V̇ ≤ −rᵀK_v r + ε Σ_i sup|T_d,i|² / (4 k_d,i), and only a residual set is guaranteed (the time average of ‖r‖²
     is O(ε); in practice |r_i| ≲ ε): e no longer goes exactly to zero.
 

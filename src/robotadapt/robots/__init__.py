@@ -1,4 +1,4 @@
-"""Robot models: dynamics linear in the parameters, batch-capable, parameters passed in (spec §1).
+"""Robot models: dynamics linear in the parameters, batch-capable, parameters passed in (docs/laws.md#model).
 
 The n-DOF models (`robotadapt.robots.symbolic` from DH tables with sympy, `robotadapt.robots.pinocchio` from URDF) import
 their optional dependency on first use, so they are importable here without it.

@@ -1,4 +1,4 @@
-"""The robot-model contract: rigid-body dynamics linear in a parameter vector φ (spec §1).
+"""The robot-model contract: rigid-body dynamics linear in a parameter vector φ (docs/laws.md#model).
 
     τ = M(q) q̈ + V_m(q, q̇) q̇ + G(q) + F(q̇)                       (6.2.1)
     M(q) a + V_m(q, q̇) v + G(q) + F(q̇) = Y(q, q̇, v, a) φ          (P3, the "two-slot" regressor)

@@ -1,7 +1,7 @@
 """Rigid-body dynamics of a serial arm from its Denavit–Hartenberg table, derived with sympy and compiled to Python.
 
 The derivation is the recursive Newton–Euler algorithm in link coordinates (Luh, Walker & Paul 1980), written for the
-mixed ("two-slot") regressor of spec §1.2 P3:
+mixed ("two-slot") regressor of docs/laws.md#model P3:
 
     Y(q, q̇, v, a) φ = M(q) a + V_m(q, q̇) v + G(q)
 

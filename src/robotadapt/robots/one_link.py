@@ -1,9 +1,10 @@
-"""One-link arm with viscous friction in a horizontal plane (spec §1.4; Examples 6.5.1, 6.5.2, 6.6.1–6.6.3).
+"""One-link arm with viscous friction in a horizontal plane (docs/laws.md#robots; Examples 6.5.1, 6.5.2, 6.6.1–6.6.3).
 
     τ = m q̈ + b q̇  (+ k q with `stiffness=True`),   φ = [m, b] (or [m, b, k]),   Y(q, q̇, v, a) = [a, q̇ (, q)]
 
-The friction column uses the measured q̇, not v (spec §1.4). The optional spring term `k q` gives the three-parameter
-model of spec §5.2 (iii), which one sinusoid cannot excite.
+The friction column uses the measured q̇, not v (docs/laws.md#robots). The optional spring term `k q` gives the
+three-parameter
+model of docs/laws.md#persistency-of-excitation (iii), which one sinusoid cannot excite.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Two-link polar arm: a revolute joint θ and a prismatic joint r carrying a point mass m (spec §1.5; Example 3.2.1).
+"""Two-link polar arm: a revolute joint θ and a prismatic joint r carrying a point mass m (docs/laws.md#polar-arm;
+Example 3.2.1).
 
     m r² θ̈ + 2 m r ṙ θ̇ + m g r cos θ = n,     m r̈ − m r θ̇² + m g sin θ = f
 
@@ -53,7 +54,7 @@ class PolarArm(RobotModel):
         return phi[..., 1:3] * dq if self.friction_terms else 0.0 * dq + 0.0 * phi[..., :1]
 
     def regressor(self, q: Array, dq: Array, v: Array, a: Array) -> Array:
-        """Y = [[r² a1 + r ṙ v1 + r θ̇ v2 + g r cos θ], [a2 − r θ̇ v1 + g sin θ]] (spec §1.5)."""
+        """Y = [[r² a1 + r ṙ v1 + r θ̇ v2 + g r cos θ], [a2 − r θ̇ v1 + g sin θ]] (docs/laws.md#polar-arm)."""
         xp = array_namespace(q, dq, v, a)
         th, r, dth, dr = q[..., 0], q[..., 1], dq[..., 0], dq[..., 1]
         y1 = r**2 * a[..., 0] + r * dr * v[..., 0] + r * dth * v[..., 1] + self.g * r * xp.cos(th)

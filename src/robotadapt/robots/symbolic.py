@@ -1,7 +1,7 @@
 """Serial arms from Denavit–Hartenberg tables: M, Christoffel V_m, G, F and the mixed regressor derived with sympy.
 
     τ = M(q) q̈ + V_m(q, q̇) q̇ + G(q) + F(q̇)                              (6.2.1)
-    Y(q, q̇, v, a) φ = M(q) a + V_m(q, q̇) v + G(q) + F(q̇)                 (spec §1.2 P3)
+    Y(q, q̇, v, a) φ = M(q) a + V_m(q, q̇) v + G(q) + F(q̇)                 (docs/laws.md#model P3)
 
 φ holds the standard inertial parameters, 10 per link ([m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz]
 with the inertia about the link-frame origin, link-frame axes: names "m1", "mx1", ..., "Izz1"), then optionally one

@@ -1,4 +1,4 @@
-"""Two-link planar revolute ("elbow") arm with point masses at the link ends (spec §1.3; book Example 3.2.2).
+"""Two-link planar revolute ("elbow") arm with point masses at the link ends (docs/laws.md#robots; book Example 3.2.2).
 
 Angles from the horizontal, gravity along −y. φ = [m1, m2] (+ [fv1, fv2] with `friction=True`, F = diag(fv) q̇).
 
@@ -67,7 +67,7 @@ class TwoLinkArm(RobotModel):
         return phi[..., 2:4] * dq if self.friction_terms else 0.0 * dq + 0.0 * phi[..., :1]
 
     def regressor(self, q: Array, dq: Array, v: Array, a: Array) -> Array:
-        """Y of spec §1.3 (general two-slot form), plus diag(q̇) friction columns."""
+        """Y of docs/laws.md#robots (general two-slot form), plus diag(q̇) friction columns."""
         xp = array_namespace(q, dq, v, a)
         c1, c2, s2, c12 = self._trig(q)
         l1, l2, g = self.l1, self.l2, self.g
@@ -84,7 +84,7 @@ class TwoLinkArm(RobotModel):
         return matrix(xp, rows)
 
     def remainder_regressor(self, q: Array, dq: Array) -> Array:
-        """Y_g of spec §1.3: `Y_g φ = −V_mᵀ q̇ + G + F`."""
+        """Y_g of docs/laws.md#robots: `Y_g φ = −V_mᵀ q̇ + G + F`."""
         xp = array_namespace(q, dq)
         c1, _, s2, c12 = self._trig(q)
         l1, l2, g = self.l1, self.l2, self.g

@@ -1,6 +1,6 @@
 """What a run's record holds besides its states, recomputed after integration from the pure maps of the controller and
 the plant, vectorized over the logged instants: torque, V(t), r(t), the passivity integral (6.4.4), φ̂ as the torque
-uses it, and the controller's monitor signals (V_φ(t), λ_min(P⁻¹(t)); spec §11).
+uses it, and the controller's monitor signals (V_φ(t), λ_min(P⁻¹(t)); the laws' proofs, docs/laws.md).
 """
 
 from __future__ import annotations
