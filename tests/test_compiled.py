@@ -161,7 +161,7 @@ def test_adaptive_computed_torque_stops_where_and_as_the_numpy_run_stops(name, o
     partial record."""
     a, b = (load(name, ["simulation.t_final=0.1", *overrides, f"simulation.backend='{backend}'"]).run()
             for backend in ("numpy", "jax"))
-    assert a.status.startswith("diverged at t=") and "M̂(q) is no longer positive definite (φ̂ = " in a.status
+    assert a.status.startswith("diverged within the step from ") and "M̂(q) is no longer positive definite (φ̂ = " in a.status
     assert_same(a, b)
 
 
@@ -172,7 +172,7 @@ def test_adaptive_computed_torque_runs_compiled_with_and_without_its_box():
         a, b = (simulate(s.plant, ctrl, s.trajectory, t_final=0.3, integrator=RK4(s.integrator.dt, backend), q0=s.q0,
                          dq0=s.dq0, log_every=2) for backend in ("numpy", "jax"))
         assert_same(a, b)
-    assert a.status.startswith("diverged at t=0.14") and b.t.size < 100
+    assert a.status.startswith("diverged within the step from 0.14") and b.t.size < 100
 
 
 REPETITIVE = ["trajectory.omega=10.0", "controller.period=0.6283185307179586", "simulation.dt=0.0015707963267948966",
@@ -212,7 +212,8 @@ def test_a_batch_where_one_computed_torque_run_stops_and_the_others_go_on():
                            integrator=RK4(1e-3, backend)) for backend in ("numpy", "jax"))
     assert b.status == a.status
     assert [st == "ok" for st in b.status] == [True, False, True, False]
-    assert b.status[1].startswith("diverged at t=0 s: the estimated mass matrix M̂(q) is no longer positive definite")
+    assert b.status[1].startswith("diverged within the step from 0 to ")
+    assert "the estimated mass matrix M̂(q) is no longer positive definite" in b.status[1]
     np.testing.assert_array_equal(b.n_logged, a.n_logged)
     for i in range(4):
         assert_same(a.run(i), b.run(i))

@@ -201,5 +201,6 @@ def _not_pd(M_hat: Array, phi_hat: Array) -> str:
     """The stop message, naming the estimate whose M̂(q) is furthest from positive definite."""
     low = np.linalg.eigvalsh(M_hat).min(axis=-1)
     worst = np.broadcast_to(phi_hat, low.shape + phi_hat.shape[-1:]).reshape(-1, phi_hat.shape[-1])[np.argmin(low)]
-    return (f"the estimated mass matrix M̂(q) is no longer positive definite (φ̂ = {np.array2string(worst, precision=4)});"
+    estimate = np.array2string(worst, precision=4)
+    return (f"the estimated mass matrix M̂(q) is no longer positive definite (φ̂ = {estimate} where it failed);"
             " set controller.phi_min/phi_max to project the estimate")

@@ -32,7 +32,7 @@ from ..plant.plant import Plant, SinusoidalDisturbance
 from ..trajectories import Reference, SumOfSines
 from ..validation import ConfigError, as_array, as_scalar, as_vector
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
-from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, Ring, Step, diverged, sample, step, stop_status, take
+from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, Ring, Step, diverged, sample, step, stop_status, take, within
 from .outputs import outputs
 from .result import SimulationResult
 
@@ -330,7 +330,7 @@ def _compiled(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any, 
 
     t, z, n_logged, t_bad, why, z_bad = integrate(loop, lambda times: traj(times[:, None]), z0, dt, n_steps, log_every,
                                                   max_state, line)
-    status = [stop_status(single(i), float(t_bad[i]), int(why[i]), max_state, z_bad[i]) for i in range(z0.shape[0])]
+    status = [stop_status(single(i), float(t_bad[i]), int(why[i]), max_state, z_bad[i], dt) for i in range(z0.shape[0])]
     T = int(n_logged.max())
     return t[:T], z[:T], n_logged, status
 
@@ -385,7 +385,7 @@ def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any,
                 applied = z if s is None else s.applied
                 z_log[k_log], k_log = applied if left.all() else np.where(left[:, None], applied, z), k_log + 1
             if raised:
-                stop({i: f"diverged at t={t:.6g} s: {why}" for i, why in raised.items()})
+                stop({i: f"diverged {within(t, dt)}: {why}" for i, why in raised.items()})
             if s is None:
                 break
             z, now = _advance(z, s.z, alive, max_state)

@@ -108,10 +108,17 @@ def diverged_status(t: float, why: int, max_state: float) -> str:
     return f"diverged at t={t:.6g} s: " + REASONS[why].format(max_state=max_state) if why else "ok"
 
 
-def stop_status(loop: ClosedLoop, t: float, why: int, max_state: float, z_bad: Array) -> str:
-    """:func:`diverged_status`, and for `why` = GUARD the law's own reason, from the stage state `z_bad` it failed at."""
+def within(t: float, dt: float) -> str:
+    """Where a run stopped that a law (or the plant) refused inside the step from t to t + dt, at one of its RK4
+    stages: the state at t was fine, the one it stopped at is the stage's (the reason names it)."""
+    return f"within the step from {t:.6g} to {t + dt:.6g} s"
+
+
+def stop_status(loop: ClosedLoop, t: float, why: int, max_state: float, z_bad: Array, dt: float) -> str:
+    """:func:`diverged_status`, and for `why` = GUARD the law's own reason, from the stage state `z_bad` it failed at
+    inside the step from `t` to `t + dt`."""
     if why == GUARD:
-        return f"diverged at t={t:.6g} s: {loop.stop_reason(z_bad)}"
+        return f"diverged {within(t, dt)}: {loop.stop_reason(z_bad)}"
     return diverged_status(t, why, max_state)
 
 

@@ -22,7 +22,7 @@ from ..plant.plant import Plant, same_model
 from ..trajectories import Trajectory
 from ..validation import ConfigError, as_scalar, as_vector
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
-from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, Ring, diverged, sample, step, stop_status, take
+from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, Ring, diverged, sample, step, stop_status, take, within
 from .outputs import outputs
 from .result import SimulationResult
 
@@ -49,7 +49,7 @@ def _rk4(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int,
                 try:
                     s = step(loop, k, t, z, line, dt, take(ref, 2 * j), take(ref, 2 * j + 1), take(ref, 2 * j + 2))
                 except SimulationStop as stop:  # the law's assumptions failed (a guarded law, on numpy)
-                    status, s = f"diverged at t={t:.6g} s: {stop}", None
+                    status, s = f"diverged {within(t, dt)}: {stop}", None
                 if k % log_every == 0:
                     z_log[k_log], k_log = z if s is None else s.applied, k_log + 1
                 if s is None:
@@ -75,7 +75,7 @@ def _rk4_compiled(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_st
     from .compiled import integrate
 
     t, z, n_logged, t_bad, why, z_bad = integrate(loop, traj, z0, dt, n_steps, log_every, max_state, line)
-    return t[:n_logged], z[:n_logged], stop_status(loop, float(t_bad), int(why), max_state, z_bad)
+    return t[:n_logged], z[:n_logged], stop_status(loop, float(t_bad), int(why), max_state, z_bad, dt)
 
 
 def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
