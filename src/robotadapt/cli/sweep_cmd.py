@@ -30,18 +30,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-plots", action="store_true", help="skip sweep.png")
 
 
-def _value(v: Any) -> str:
-    """A swept value as printed: numbers (also in lists) to 4 significant digits, anything else as it is."""
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    if isinstance(v, list):
-        return "[" + ", ".join(map(_value, v)) + "]"
-    return str(v)
-
-
 def _summary(rows: list[dict[str, Any]], keys: list[str], metric: str) -> str:
     """One line: runs finished, and the best value of `metric` with the swept values of its run (4 significant
     digits)."""
+    from ..studies.compare import number_text
     from ..studies.sweep import scalar
 
     ok = [row for row in rows if row.get("status") == "ok"]
@@ -49,7 +41,7 @@ def _summary(rows: list[dict[str, Any]], keys: list[str], metric: str) -> str:
     values = [(scalar(row.get(metric)), row) for row in ok if not math.isnan(scalar(row.get(metric)))]
     if values:
         best, row = min(values, key=lambda v: v[0])
-        at = ", ".join(f"{k}={_value(row[k])}" for k in keys)
+        at = ", ".join(f"{k}={number_text(row[k])}" for k in keys)
         line += f"; {metric}: best {best:.4g} at run {row['run']} ({at})"
     return line
 

@@ -19,6 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..files import atomic_write  # noqa: E402
+from ..studies.compare import number_text  # noqa: E402
 from ..studies.sweep import scalar  # noqa: E402
 from .figures import parameter_unit, tex_name  # noqa: E402
 
@@ -114,21 +115,13 @@ def grid_keys(rows: list[dict[str, Any]], keys: list[str]) -> list[str]:
     return out
 
 
-def _value_text(v: Any) -> str:
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    if isinstance(v, list):
-        return "[" + ", ".join(map(_value_text, v)) + "]"
-    return str(v)
-
-
 def _classes(rows: list[dict[str, Any]], grid: list[str]) -> tuple[np.ndarray, list[str]]:
     """Each row's colour class (its grid point; by the first grid key when there are too many points) and the
     legend text of each class."""
     used = grid if len({tuple(str(r.get(k)) for k in grid) for r in rows}) <= MAX_GRID_VALUES else grid[:1]
     points = [tuple(str(row.get(k)) for k in used) for row in rows]
     order = list(dict.fromkeys(points))
-    texts = [", ".join(f"{k.rsplit('.', 1)[-1]} = {_value_text(rows[points.index(p)].get(k))}" for k in used)
+    texts = [", ".join(f"{k.rsplit('.', 1)[-1]} = {number_text(rows[points.index(p)].get(k))}" for k in used)
              for p in order]
     return np.array([order.index(p) for p in points]), texts
 

@@ -32,20 +32,25 @@ class SampledTick(Protocol):
     """What this driver needs of :class:`robotadapt.sim.sampled.Tick` (a protocol: that module imports this one)."""
 
     @property
-    def loop(self) -> Any: ...
+    def loop(self) -> Any:
+        """The closed loop (plant, controller) the tick steps."""
 
     @property
-    def opts(self) -> Any: ...
+    def opts(self) -> Any:
+        """The Sampled integrator: control period, plant sub-steps, discretisation."""
 
     @property
-    def sensor(self) -> Any: ...
+    def sensor(self) -> Any:
+        """The measurement path (its seed draws the noise fed to the ticks)."""
 
     def __call__(self, carry: Any, inputs: Any) -> tuple[Any, Any, Any]:
         """(next carry, record, verdict (held, why, q_bad, x_bad)) of one tick."""
 
-    def blank(self, carry: Any) -> Any: ...
+    def blank(self, carry: Any) -> Any:
+        """A record of zeros shaped like the tick's (what a compiled block starts from)."""
 
-    def status(self, t: float, why: int, q_bad: Array, x_bad: Array) -> str: ...
+    def status(self, t: float, why: int, q_bad: Array, x_bad: Array) -> str:
+        """The run's status for a stop at `t` with reason code `why` (0: ok)."""
 
 
 _PROGRAMS: dict[Any, tuple[Any, Callable[..., Any]]] = {}
