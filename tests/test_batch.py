@@ -83,8 +83,10 @@ def test_per_run_slotine_li_gains_and_sinusoids_equal_single_runs():
     batch = simulate_batch(plant, ctrls, trajs, t_final=0.5, log_every=5)
     merged = stack(ctrls, "controller")
     assert merged.Kv.shape == (N, 2, 2) and merged.Lam.shape == (N, 2, 2) and merged.Gamma.shape == (N, 2, 2)
-    for i in range(N):
-        assert_same_run(batch.run(i), simulate(plant, ctrls[i], trajs[i], t_final=0.5, log_every=5))
+    for i, together in enumerate(batch.runs()):
+        single = simulate(plant, ctrls[i], trajs[i], t_final=0.5, log_every=5)
+        assert_same_run(batch.run(i), single)
+        assert_same_run(together, single)
 
 
 SCENARIOS = {  # packaged scenarios, one per controller family; overrides keep them short and running
@@ -115,11 +117,13 @@ def test_every_controller_family_batches_over_plant_parameters_and_initial_state
         ctrls = [dataclasses.replace(s.controller, phi_hat0=s.controller.phi_hat0 * k) for k in scale]
     batch = simulate_batch(plants, ctrls, s.trajectory, t_final=t_final, integrator=s.integrator, q0=q0, dq0=s.dq0,
                            log_every=10)
+    together = batch.runs()  # the outputs of every run computed at once, over the run axis
     for i in range(N):
         single = simulate(plants[i], ctrls[i], s.trajectory, t_final=t_final, integrator=s.integrator, q0=q0[i],
                           dq0=s.dq0, log_every=10)
         assert single.ok
         assert_same_run(batch.run(i), single)
+        assert_same_run(together[i], single)
 
 
 def test_plants_with_more_state_than_q_and_dq_batch_too():
@@ -133,9 +137,10 @@ def test_plants_with_more_state_than_q_and_dq_batch_too():
     q0 = np.array([[0.0, 0.0], [0.2, -0.1]])
     batch = simulate_batch(plants, slotine_li(), sinusoid(2), t_final=0.3, q0=q0, log_every=10)
     assert batch.z.shape[-1] == 4 * 2 + 2
-    for i in range(2):
-        assert_same_run(batch.run(i), simulate(plants[i], slotine_li(), sinusoid(2), t_final=0.3, q0=q0[i],
-                                               log_every=10))
+    for i, together in enumerate(batch.runs()):
+        single = simulate(plants[i], slotine_li(), sinusoid(2), t_final=0.3, q0=q0[i], log_every=10)
+        assert_same_run(batch.run(i), single)
+        assert_same_run(together, single)
     assert np.max(np.abs(batch.run(0).tau)) == pytest.approx(60.0)  # the limit is reached: the path is exercised
 
 

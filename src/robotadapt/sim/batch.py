@@ -33,7 +33,7 @@ from ..trajectories import Reference, SumOfSines
 from ..validation import ConfigError, as_array, as_scalar, as_vector
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
 from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, Ring, Step, diverged, sample, step, stop_status, take, within
-from .outputs import outputs
+from .outputs import batch_outputs, outputs
 from .result import SimulationResult
 
 Array = Any
@@ -140,14 +140,29 @@ class BatchResult:
         """Per run: True where it ran to the end."""
         return np.array([s == "ok" for s in self.status])
 
+    def _info(self, i: int) -> dict[str, Any]:
+        plant = self.plants[i]
+        return {**self.info, "run": i} | ({"plant": plant.describe()} if plant.describe() else {})
+
     def run(self, i: int) -> SimulationResult:
         """Run `i` as a :class:`~robotadapt.result.SimulationResult` (outputs recomputed as `simulate` does)."""
         i = range(len(self))[i]
         k, plant = int(self.n_logged[i]), self.plants[i]
-        info = {**self.info, "run": i} | ({"plant": plant.describe()} if plant.describe() else {})
         with np.errstate(all="ignore"):
             return outputs(ClosedLoop(plant, self.controllers[i], plant.model.n), self.trajectories[i], self.t[:k],
-                            self.z[:k, i], self.status[i], self.wall_time / len(self), info)
+                           self.z[:k, i], self.status[i], self.wall_time / len(self), self._info(i))
+
+    def runs(self) -> list[SimulationResult]:
+        """Every run's record, equal to `[self.run(i) for i in range(N)]`; their outputs computed together, by the
+        merged loop over the batch axis, when every run was logged to the end and the true φ is constant in time
+        (what a sweep's chunk asks: its metrics, not N recomputations)."""
+        N = len(self)
+        if (self.n_logged < len(self.t)).any() or any(p.varies for p in self.plants) or N < 2:
+            return [self.run(i) for i in range(N)]
+        loop = ClosedLoop(stack(self.plants, "plant"), stack(self.controllers, "controller"), self.plants[0].model.n)
+        with np.errstate(all="ignore"):
+            return batch_outputs(loop, self.controllers, stack(self.trajectories, "trajectory"), self.t, self.z,
+                                 self.status, self.wall_time / N, [self._info(i) for i in range(N)])
 
 
 

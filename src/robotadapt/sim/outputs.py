@@ -8,16 +8,18 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+import numpy as np
+
 from .._array import matvec
 from ..controllers.base import HasFilteredError, HasInstantEstimate, HasLyapunov, HasRegressor
-from ..trajectories import Trajectory
+from ..trajectories import Reference, Trajectory
 from .loop import ClosedLoop
 from .result import SimulationResult
 
 Array = Any
 
 def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status: str, wall: float,
-             info: dict[str, Any], logged: dict[str, Array] | None = None) -> SimulationResult:
+            info: dict[str, Any], logged: dict[str, Array] | None = None) -> SimulationResult:
     """Recompute torque, V(t), r(t) and the passivity integral (6.4.4) from the pure maps at the logged instants.
 
     `logged` (sampled-data mode) holds the torque applied at each logged tick (`tau`) and what the run recorded
@@ -26,42 +28,72 @@ def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status
     truth is the plant's φ(t) when the controller's model is the plant's; the result's `phi` is its value at the last
     sample, and `monitors["phi_true"]` its history when it changed during the run (a payload attached).
     """
+    signals, extras = _signals(loop, trajectory, t, t, z, logged)
+    truth = signals.pop("truth")
+    phi = None if truth is None else truth[-1] if truth.ndim == 2 else truth
+    if phi is not None and loop.plant.varies:
+        extras["phi_true"] = truth
+    return _result(loop.controller, t, signals, phi, extras, status, wall, info)
+
+
+def batch_outputs(loop: ClosedLoop, controllers: tuple[Any, ...], trajectory: Trajectory, t: Array, z: Array,
+                  status: tuple[str, ...], wall: float, info: list[dict[str, Any]]) -> list[SimulationResult]:
+    """:func:`outputs` of N runs logged together, `z` `(T, N, m)` (every run logged at every `t`), computed once
+    for the batch by the merged `loop` (gains stacked over the runs) and `trajectory`: run i's record is its slice,
+    with `controllers[i]` for the signals that need one run's controller. The plant's φ must not change during the
+    runs (no payload attached after t = 0)."""
+    signals, extras = _signals(loop, trajectory, t, t[:, None], z, None)
+    truth = signals.pop("truth")
+    out = []
+    for i, ctrl in enumerate(controllers):
+        phi = None if truth is None else truth[i] if truth.ndim == 2 else truth
+        run = {k: None if v is None else v[:, i] for k, v in signals.items()}
+        out.append(_result(ctrl, t, run, phi, {k: v[:, i] for k, v in extras.items()}, status[i], wall, info[i]))
+    return out
+
+
+def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z: Array,
+             logged: dict[str, Array] | None) -> tuple[dict[str, Array | None], dict[str, Array]]:
+    """The record's arrays at the logged `t` (`times`: t shaped to broadcast against the runs' axes of `z`), the
+    true φ there under "truth" (None when unknown, or when the law estimates none of the plant's parameters), and
+    the extra monitor series."""
     ctrl, plant = loop.controller, loop.plant
     q, dq, x = loop.split(z)
-    ref = trajectory(t)
+    ref = Reference(*(a if a.shape == q.shape else np.broadcast_to(a, q.shape) for a in trajectory(times)))
     extras = dict(logged or {})
     if logged is None:
-        commanded = loop.torque(t, z, ref)
+        commanded = loop.torque(times, z, ref)
         tau = plant.saturate(commanded)
         if plant.actuator is not None:
             extras["tau_commanded"] = commanded
     else:
         tau = extras.pop("tau")
     q_seen, dq_seen = extras.get("q_measured", q), extras.get("dq_measured", dq)
-    phi_hat = (ctrl.phi_hat_at(t, x, q_seen, dq_seen, ref) if isinstance(ctrl, HasInstantEstimate)
+    phi_hat = (ctrl.phi_hat_at(times, x, q_seen, dq_seen, ref) if isinstance(ctrl, HasInstantEstimate)
                else ctrl.phi_hat(x))
-    truth = plant.truth_for(ctrl.model, t)
-    phi = None
-    if truth is not None and phi_hat.shape[-1] == plant.model.p:
-        phi = truth[-1] if truth.ndim == 2 else truth
-    known = phi is not None
-    V = ctrl.lyapunov(t, x, q, dq, ref, truth) if isinstance(ctrl, HasLyapunov) and truth is not None else None
-    r = ctrl.filtered_error(t, x, q, dq, ref) if isinstance(ctrl, HasFilteredError) else None
+    truth = plant.truth_for(ctrl.model, times)
+    V = ctrl.lyapunov(times, x, q, dq, ref, truth) if isinstance(ctrl, HasLyapunov) and truth is not None else None
+    if truth is not None and phi_hat.shape[-1] != plant.model.p:
+        truth = None  # the law estimates no parameters of the plant's: the record has no true φ
+    r = ctrl.filtered_error(times, x, q, dq, ref) if isinstance(ctrl, HasFilteredError) else None
     passivity = None
-    if isinstance(ctrl, HasRegressor) and known and t.size > 1:
-        Z, r_z = ctrl.regressor(t, x, q, dq, ref)
+    if isinstance(ctrl, HasRegressor) and truth is not None and t.size > 1:
+        Z, r_z = ctrl.regressor(times, x, q, dq, ref)
         from scipy.integrate import cumulative_simpson  # here: importing the simulator stays light
 
-        passivity = cumulative_simpson(-(r_z * matvec(Z, truth - phi_hat)).sum(axis=-1), x=t, initial=0.0)
-    if known and plant.varies:
-        extras["phi_true"] = truth
+        passivity = cumulative_simpson(-(r_z * matvec(Z, truth - phi_hat)).sum(axis=-1), x=t, axis=0, initial=0.0)
     extras.update(plant.extra_series(z[..., : loop.m]))
-    result = SimulationResult(
-        t=t, q=q, dq=dq, x=x, q_des=ref.q_des, dq_des=ref.dq_des, ddq_des=ref.ddq_des, tau=tau, V=V, r=r,
-        phi_hat=phi_hat, phi=phi, param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
-        state_names=ctrl.state_names, status=status,
-        wall_time=wall, info=info, passivity=passivity,
-    )
+    return {"q": q, "dq": dq, "x": x, "q_des": ref.q_des, "dq_des": ref.dq_des, "ddq_des": ref.ddq_des, "tau": tau,
+            "V": V, "r": r, "phi_hat": phi_hat, "passivity": passivity, "truth": truth}, extras
+
+
+def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | None, extras: dict[str, Array],
+            status: str, wall: float, info: dict[str, Any]) -> SimulationResult:
+    phi_hat = signals["phi_hat"]
+    assert phi_hat is not None
+    result = SimulationResult(t=t, **signals, phi=phi,  # type: ignore[arg-type]
+                              param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
+                              state_names=ctrl.state_names, status=status, wall_time=wall, info=info)
     return replace(result, monitors={**controller_series(result, ctrl), **extras})
 
 

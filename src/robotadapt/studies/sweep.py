@@ -185,7 +185,8 @@ def _build(data: dict[str, Any], point: Point) -> Setup:
 
 
 def _metrics(setups: list[Setup]) -> tuple[list[dict[str, Any] | ConfigError], str]:
-    """The metrics of each run (one result alive at a time), vectorized if the setups allow it; and how they ran."""
+    """The metrics of each run, vectorized if the setups allow it (their outputs computed together,
+    :meth:`~robotadapt.sim.batch.BatchResult.runs`); and how they ran."""
     first = setups[0]
     try:
         if any((s.t_final, s.integrator, s.max_state) != (first.t_final, first.integrator, first.max_state)
@@ -195,7 +196,7 @@ def _metrics(setups: list[Setup]) -> tuple[list[dict[str, Any] | ConfigError], s
                                [s.trajectory for s in setups], t_final=first.t_final, integrator=first.integrator,
                                q0=np.stack([s.q0 for s in setups]), dq0=np.stack([s.dq0 for s in setups]),
                                log_every=log_every(first), max_state=first.max_state)
-        return [metrics(batch.run(i)) for i in range(len(batch))], "vectorized (simulate_batch)"
+        return [metrics(res) for res in batch.runs()], "vectorized (simulate_batch)"
     except ConfigError as exc:
         how = f"one scenario per run ({exc})"
     out: list[dict[str, Any] | ConfigError] = []
