@@ -45,6 +45,33 @@ from ..validation import ConfigError
 Array = Any
 #: the order of a link's standard parameters (Pinocchio's `Inertia.toDynamicParameters` order)
 LINK_PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+#: a chain's optional per-joint column groups, in this order after the 10n inertial ones, and their names' prefixes
+EXTRAS = ("rotor_inertia", "viscous", "coulomb")
+EXTRA_NAMES = {"rotor_inertia": "Ia", "viscous": "fv", "coulomb": "fc"}
+#: a link's keys in a DH table (`[[robot.links]]`)
+LINK_KEYS = ("joint", "a", "alpha", "d", "theta", "m", "com", "inertia", *EXTRAS, "q_limits")
+
+
+class SerialChain:
+    """The joint count and parameter layout shared by the serial-chain models (the symbolic DH arm, the kinematic
+    tree): 10 standard parameters per link (`LINK_PARAMS`), then n columns per optional group of `EXTRAS` the model
+    has (a field of that name, None when absent). A mixin: the models are dataclasses with these fields."""
+
+    joints: str  # one letter per joint, "R" or "P"
+
+    @property
+    def n(self) -> int:
+        return len(self.joints)
+
+    @property
+    def extras(self) -> tuple[str, ...]:
+        """The optional column groups present, in order."""
+        return tuple(name for name in EXTRAS if getattr(self, name) is not None)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        names = [f"{p}{i + 1}" for i in range(self.n) for p in LINK_PARAMS]
+        return tuple(names + [f"{EXTRA_NAMES[e]}{i + 1}" for e in self.extras for i in range(self.n)])
 #: the generated functions: name → (argument names, whether the last argument is φ)
 FUNCTIONS = {"regressor": ("q", "dq", "v", "a"), "momentum": ("q", "dq"), "remainder": ("q", "dq"),
              "mass": ("q", "phi"), "coriolis": ("q", "dq", "phi"), "gravity": ("q", "phi")}

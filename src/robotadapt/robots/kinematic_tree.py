@@ -48,18 +48,14 @@ from dataclasses import dataclass, field, replace
 from os import PathLike
 from pathlib import Path
 from typing import Any
-from xml.etree import ElementTree
 
 import numpy as np
 
 from .._array import array_namespace
 from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
 from .base import Array, RobotModel
-from .dh import LINK_PARAMS, Geometry, joint_placements
+from .dh import EXTRAS, LINK_KEYS, Geometry, SerialChain, joint_placements
 
-EXTRAS = ("rotor_inertia", "viscous", "coulomb")  # optional column groups, in this order after the 10n inertial ones
-EXTRA_NAMES = {"rotor_inertia": "Ia", "viscous": "fv", "coulomb": "fc"}
-LINK_KEYS = ("joint", "a", "alpha", "d", "theta", "m", "com", "inertia", *EXTRAS, "q_limits")
 _MATMUL_ABOVE = 64  # leading size (states × links) above which small products use matmul (see `_many`)
 _PAIRS = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # I_xx, I_xy, I_yy, I_xz, I_yz, I_zz
 # Pinocchio joints this model takes: short name → (kind, axis or None: the joint's own `axis`)
@@ -185,7 +181,7 @@ class _Motion:
 
 
 @dataclass(frozen=True, eq=False)
-class KinematicTree(RobotModel):
+class KinematicTree(SerialChain, RobotModel):
     """A chain (or tree) of revolute ('R') and prismatic ('P') joints: constants only, every method traceable.
 
     Per joint: `parents` (index of the parent joint, −1 for the base; parents come first), `rotation` (n, 3, 3) and
@@ -316,37 +312,10 @@ class KinematicTree(RobotModel):
         """The arm of the URDF file `path` read by Pinocchio, with the joints named in `locked` fixed at their neutral
         position (grippers), optional column groups (defaults from the URDF's `<dynamics damping friction>`), and
         `gravity` (m/s², base axes; default (0, 0, −9.81))."""
-        try:
-            import pinocchio as pin
-        except ImportError:
-            raise ConfigError("robot.urdf", "URDF robots need Pinocchio: pip install 'robotadapt[urdf]'") from None
-        if not isinstance(path, str | PathLike):
-            raise ConfigError("robot.urdf", f"expected the path of a URDF file, got {path!r}")
-        path = Path(path)
-        if not path.is_file():
-            raise ConfigError("robot.urdf", f"no file at {str(path)!r}: give the path of an existing .urdf file")
-        try:  # checked first: urdfdom writes its own parse errors to stderr
-            root = ElementTree.parse(path).getroot()
-        except ElementTree.ParseError as exc:
-            raise ConfigError("robot.urdf", f"{str(path)!r} is not an XML file ({exc}): give a URDF file") from None
-        if root.tag != "robot":
-            raise ConfigError("robot.urdf", f"{str(path)!r} is not a URDF (root <{root.tag}>, not <robot>)")
-        try:
-            model = pin.buildModelFromUrdf(str(path))
-        except (RuntimeError, ValueError) as exc:
-            raise ConfigError("robot.urdf", f"Pinocchio cannot read {str(path)!r}: {exc}") from None
-        if isinstance(locked, str) or not isinstance(locked, Sequence) or not all(isinstance(j, str) for j in locked):
-            raise ConfigError("robot.locked", f"expected a list of joint names, got {locked!r}")
-        if locked:
-            names = list(model.names)
-            missing = [j for j in locked if j not in names[1:]]
-            if missing:
-                raise ConfigError("robot.locked", f"no joint named {', '.join(map(repr, missing))} in {path.name}; "
-                                  f"its joints: {', '.join(names[1:])}")
-            model = pin.buildReducedModel(model, [names.index(j) for j in locked], pin.neutral(model))
-        if gravity is not None:
-            model.gravity = pin.Motion(as_vector(gravity, 3, "robot.gravity", broadcast=False), np.zeros(3))
-        return cls._from_model(model, rotor_inertia, viscous, coulomb, path.stem, "robot.urdf")
+        from .pinocchio import urdf_model
+
+        model = urdf_model(path, locked, gravity, "robot.urdf", "robot.locked")
+        return cls._from_model(model, rotor_inertia, viscous, coulomb, Path(path).stem, "robot.urdf")
 
     @classmethod
     def example(cls, name: str, locked: Sequence[str] = (), rotor_inertia: bool = False, viscous: bool = False,
@@ -428,20 +397,6 @@ class KinematicTree(RobotModel):
         return cls.from_dh(links, arm.convention, arm.g)
 
     # -- structure ----------------------------------------------------------------------------------------------------
-
-    @property
-    def n(self) -> int:
-        return len(self.joints)
-
-    @property
-    def extras(self) -> tuple[str, ...]:
-        """The optional column groups present, in order."""
-        return tuple(name for name in EXTRAS if getattr(self, name) is not None)
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        names = [f"{p}{i + 1}" for i in range(self.n) for p in LINK_PARAMS]
-        return tuple(names + [f"{EXTRA_NAMES[e]}{i + 1}" for e in self.extras for i in range(self.n)])
 
     @property
     def default_phi(self) -> Array:

@@ -63,6 +63,40 @@ def _pin() -> Any:
     return pinocchio
 
 
+def urdf_model(path: Any, locked: Any, gravity: Any, path_field: str, locked_field: str) -> Any:
+    """Pinocchio's model of the URDF file `path`, the joints named in `locked` fixed at their neutral position, and
+    `gravity` (3 numbers, base axes; None: Pinocchio's (0, 0, −9.81)); bad input is a ConfigError naming `path_field`
+    or `locked_field` (the scenario keys of the model that reads it)."""
+    pin = _pin()
+    if not isinstance(path, str | PathLike):
+        raise ConfigError(path_field, f"expected the path of a URDF file, got {path!r}")
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(path_field, f"no file at {str(path)!r}: give the path of an existing .urdf file")
+    try:  # checked first: urdfdom writes its own parse errors straight to stderr
+        root = ElementTree.parse(path).getroot()
+    except ElementTree.ParseError as exc:
+        raise ConfigError(path_field, f"{str(path)!r} is not an XML file ({exc}): give a URDF file") from None
+    if root.tag != "robot":
+        raise ConfigError(path_field, f"{str(path)!r} is not a URDF (root <{root.tag}>, not <robot>)")
+    try:
+        model = pin.buildModelFromUrdf(str(path))
+    except (RuntimeError, ValueError) as exc:
+        raise ConfigError(path_field, f"Pinocchio cannot read {str(path)!r}: {exc}") from None
+    if isinstance(locked, str) or not isinstance(locked, list | tuple) or not all(isinstance(j, str) for j in locked):
+        raise ConfigError(locked_field, f"expected a list of joint names, got {locked!r}")
+    if locked:
+        names = list(model.names)
+        missing = [j for j in locked if j not in names[1:]]
+        if missing:
+            raise ConfigError(locked_field, f"no joint named {', '.join(map(repr, missing))} in {path.name}; its "
+                              f"joints: {', '.join(names[1:])}")
+        model = pin.buildReducedModel(model, [names.index(j) for j in locked], pin.neutral(model))
+    if gravity is not None:
+        model.gravity = pin.Motion(as_vector(gravity, 3, "robot.gravity", broadcast=False), np.zeros(3))
+    return model
+
+
 def _unit_inertias() -> Array:
     """T of shape (10, 6, 6) with I_k = Σ_p φ_k,p T_p the spatial inertia [[m 1, −[h]×], [[h]×, I]] (h = m c) in
     Pinocchio's [linear; angular] order."""
@@ -110,34 +144,8 @@ class PinocchioArm(RobotModel):
                   gravity: Any = None) -> PinocchioArm:
         """The arm of the URDF file `path`, with `locked_joints` (names) fixed at their neutral position, optional
         friction columns, and `gravity` (m/s², 3 numbers in the base frame; default Pinocchio's (0, 0, −9.81))."""
-        pin = _pin()
-        if not isinstance(path, str | PathLike):
-            raise ConfigError("robot.path", f"expected the path of a URDF file, got {path!r}")
-        path = Path(path)
-        if not path.is_file():
-            raise ConfigError("robot.path", f"no URDF file at {str(path)!r}")
-        try:  # checked here first: urdfdom writes its own parse errors straight to stderr
-            root = ElementTree.parse(path).getroot()
-        except ElementTree.ParseError as exc:
-            raise ConfigError("robot.path", f"{str(path)!r} is not an XML file: {exc}") from None
-        if root.tag != "robot":
-            raise ConfigError("robot.path", f"{str(path)!r} is not a URDF: its root element is <{root.tag}>, not <robot>")
-        try:
-            model = pin.buildModelFromUrdf(str(path))
-        except (RuntimeError, ValueError) as exc:
-            raise ConfigError("robot.path", f"cannot read {str(path)!r} as URDF: {exc}") from None
-        if not isinstance(locked_joints, list | tuple) or not all(isinstance(j, str) for j in locked_joints):
-            raise ConfigError("robot.locked_joints", f"expected a list of joint names, got {locked_joints!r}")
-        if locked_joints:
-            names = list(model.names)
-            missing = [j for j in locked_joints if j not in names[1:]]
-            if missing:
-                raise ConfigError("robot.locked_joints", f"no joint named {', '.join(missing)}; joints: "
-                                  f"{', '.join(names[1:])}")
-            model = pin.buildReducedModel(model, [names.index(j) for j in locked_joints], pin.neutral(model))
-        if gravity is not None:
-            model.gravity = pin.Motion(as_vector(gravity, 3, "robot.gravity", broadcast=False), np.zeros(3))
-        return cls(model, viscous, coulomb, path.stem)
+        model = urdf_model(path, locked_joints, gravity, "robot.path", "robot.locked_joints")
+        return cls(model, viscous, coulomb, Path(path).stem)
 
     @classmethod
     def example(cls, name: str, locked_joints: Any = (), viscous: bool = False, coulomb: bool = False,

@@ -24,14 +24,11 @@ import numpy as np
 from .._array import array_namespace
 from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
 from .base import Array, RobotModel
-from .dh import LINK_PARAMS, Compiled, Geometry, compiled, joint_placements
-
-EXTRAS = ("rotor_inertia", "viscous", "coulomb")  # optional per-joint columns, in this order after the 10n inertial ones
-EXTRA_NAMES = {"rotor_inertia": "Ia", "viscous": "fv", "coulomb": "fc"}
+from .dh import EXTRAS, LINK_KEYS, Compiled, Geometry, SerialChain, compiled, joint_placements
 
 
 @dataclass(frozen=True, eq=False)
-class SymbolicArm(RobotModel):
+class SymbolicArm(SerialChain, RobotModel):
     """A serial arm of revolute ('R') and prismatic ('P') joints given by its DH table and link inertias.
 
     Geometry (per joint, SI units): `a`, `alpha`, `d`, `theta` (for a revolute joint θ = q + theta, for a prismatic one
@@ -107,21 +104,6 @@ class SymbolicArm(RobotModel):
         """What the symbolic derivation depends on (the inertial values do not enter it)."""
         a, alpha, d, theta, g = (tuple(float(x) for x in getattr(self, k)) for k in ("a", "alpha", "d", "theta", "g"))
         return Geometry(self.joints, a, alpha, d, theta, self.convention == "modified", (g[0], g[1], g[2]))
-
-    @property
-    def n(self) -> int:
-        return len(self.joints)
-
-    @property
-    def extras(self) -> tuple[str, ...]:
-        """The optional column groups present, in order."""
-        return tuple(name for name in EXTRAS if getattr(self, name) is not None)
-
-    @property
-    def param_names(self) -> tuple[str, ...]:
-        n = self.n
-        names = [f"{p}{i + 1}" for i in range(n) for p in LINK_PARAMS]
-        return tuple(names + [f"{EXTRA_NAMES[e]}{i + 1}" for e in self.extras for i in range(n)])
 
     @property
     def default_phi(self) -> Array:
@@ -251,7 +233,6 @@ def _table(value: Any, shape: tuple[int, ...], field_: str) -> Array:
 # ---------------------------------------------------------------------------------------------------------------------
 # Constructors (the scenario kinds "dh", "planar", "puma560")
 
-LINK_KEYS = ("joint", "a", "alpha", "d", "theta", "m", "com", "inertia", *EXTRAS, "q_limits")
 _COLUMNS = ("joint", "a", "alpha", "d", "theta", "m", "com", "inertia")
 
 
