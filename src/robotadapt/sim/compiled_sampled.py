@@ -90,6 +90,9 @@ def _program(tick: SampledTick, log_every: int) -> tuple[Callable[..., Any], lis
     @jax.jit
     def run(arrays: list[Array], state: Any, xs: Any, n_ticks: Array, blank: Any) -> Any:
         traced = rebuild(template, iter(arrays))
+        plant = traced.loop.plant
+        for name in ("acceleration", "derivative"):  # traced once, called by every RK4 stage of every plant sub-step
+            object.__setattr__(plant, name, jax.jit(getattr(plant, name)))  # (an n-DOF arm's: thousands of operations)
 
         def block(state: Any, xs: Any) -> tuple[Any, Any]:
             """The block's ticks that exist (none of the padding after t_final), keeping the first one's record."""
