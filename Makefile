@@ -16,7 +16,7 @@ $(VENV)/.core: $(BIN)/python pyproject.toml
 	touch $@
 
 $(VENV)/.dev: $(BIN)/python pyproject.toml
-	$(PIP) install --quiet -e ".[dev,symbolic,urdf,dist,jax]"
+	$(PIP) install --quiet -e ".[dev,symbolic,urdf,dist,jax,mujoco]"
 	touch $@
 
 demo: $(VENV)/.core                ## set up and run the flagship example (Example 6.3.1) into results/
@@ -25,6 +25,8 @@ demo: $(VENV)/.core                ## set up and run the flagship example (Examp
 test: $(VENV)/.dev                 ## set up and run the fast test suite
 	@command -v chromium >/dev/null 2>&1 || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
 	  chromium >/dev/null) || echo "chromium not installable here: tests/test_report.py skips the browser test"
+	@ldconfig -p 2>/dev/null | grep -q libOSMesa || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install \
+	  -y -qq libosmesa6 >/dev/null) || echo "libosmesa6 not installable here: --video fails, its test in tests/test_mujoco.py skips"
 	$(BIN)/ruff check src tests benchmarks docs
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -q -n 2 -m "not slow"

@@ -90,7 +90,7 @@ def test_loops_of_one_shape_share_a_program_and_keep_their_own_gains():
 
 @pytest.mark.parametrize(("overrides", "message"), [
     (["simulation.backend='cuda'"], r"^simulation\.backend: expected one of (auto, )?numpy, jax; got 'cuda'"),
-    (["simulation.backend='jax'", "simulation.method='RK45'"], r"^simulation\.backend: the compiled backend steps"),
+    (["simulation.backend='jax'", "simulation.method='RK45'"], r"^simulation\.method: a controller with a delay line"),
 ])
 def test_what_cannot_be_compiled_is_a_clear_error(overrides, message):
     with pytest.raises(ConfigError, match=message):

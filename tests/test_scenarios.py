@@ -7,6 +7,7 @@ import contextlib
 import copy
 import io
 import math
+import os
 import re
 import sys
 import tempfile
@@ -217,3 +218,34 @@ def test_a_relative_urdf_path_is_relative_to_the_scenario_file(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(tomli_w.dumps(data))
     assert load(path).setup.plant.model.n == 6
+
+
+
+def test_a_robot_is_built_once_per_section_and_again_when_its_file_changes(tmp_path):
+    """The runs of a sweep share one model object per [robot] section (a URDF arm takes tens of ms to build); another
+    section builds another model, and a URDF file written again is read again."""
+    from robotadapt.studies.scenarios.build import robot
+
+    data = load("example-6.3.1", []).data
+    assert robot(copy.deepcopy(data["robot"])) is robot(copy.deepcopy(data["robot"]))
+    assert robot({**data["robot"], "l1": 0.5}).mass_matrix(np.zeros(2), np.ones(2))[0, 0] != \
+        robot(data["robot"]).mass_matrix(np.zeros(2), np.ones(2))[0, 0]
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(URDF_ARM.format(mass=1.0))
+    section = {"kind": "urdf", "path": str(urdf)}
+    first = robot(section)
+    assert robot(dict(section)) is first
+    urdf.write_text(URDF_ARM.format(mass=2.0))
+    os.utime(urdf, ns=(urdf.stat().st_atime_ns, urdf.stat().st_mtime_ns + 10**9))
+    again = robot(section)
+    assert again is not first and again.default_phi[0] == 2.0 and first.default_phi[0] == 1.0
+
+
+URDF_ARM = """<robot name="r">
+  <link name="base"/>
+  <link name="a"><inertial><origin xyz="0 0 0.1"/><mass value="{mass}"/>
+    <inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="first" type="revolute"><parent link="base"/><child link="a"/><origin xyz="0 0 0.3"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="10" velocity="1"/></joint>
+</robot>
+"""

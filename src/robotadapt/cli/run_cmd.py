@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ..plant.mujoco import MujocoPlant
 from .common import add_scenario_arguments, overrides, summary
 
 EXIT_DIVERGED = 1
@@ -17,6 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_scenario_arguments(run)
     run.add_argument("--out", type=Path, help="output folder (default: results/NAME)")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    run.add_argument("--video", action="store_true", help="also write motion.mp4: the arm and, as a ghost, the desired "
+                     "pose, rendered off-screen by MuJoCo (extra [mujoco]; OSMesa on a machine without display)")
 
 
 def _study(scenario: Any, out: Path, no_plots: bool) -> None:
@@ -53,7 +56,16 @@ def main(args: argparse.Namespace) -> int:
         from ..report.figures import save_figures
 
         save_figures(result, out, title=scenario.name, model=scenario.setup.controller.model)
+        if isinstance(scenario.setup.plant, MujocoPlant):
+            from ..report.mujoco import option_estimates
+
+            option_estimates(result, scenario.setup.plant, model, out / "mujoco_options.png", scenario.name)
     print(summary(scenario.name, metrics(result, model)))
+    if args.video:
+        from ..report.video import save_video
+        from ..studies.scenarios.build import mujoco_view
+
+        print(f"wrote {save_video(result, mujoco_view(scenario.data, scenario.setup.plant), out / 'motion.mp4')}")
     if scenario.study:
         _study(scenario, out, args.no_plots)
     print(f"wrote {out}/")

@@ -61,8 +61,8 @@ def jax_module() -> Any:
 def skeleton(obj: Any, leaves: list[Array]) -> Any:
     """A hashable description of `obj` (the closed loop: plant, model, controller, the dataclasses inside) with its
     float arrays moved to `leaves`: two loops with the same skeleton share one compiled program, their gains, true
-    parameters and tables passed as arguments. Other values (floats, flags, integer tables) are part of the
-    skeleton; an unhashable one is taken by identity."""
+    parameters and tables passed as arguments. Other values (floats, flags, integer tables, the arrays of a dict of
+    constants) are part of the skeleton; an unhashable one is taken by identity."""
     if isinstance(obj, np.ndarray):
         if obj.dtype.kind == "f":
             leaves.append(obj)
@@ -72,6 +72,17 @@ def skeleton(obj: Any, leaves: list[Array]) -> Any:
         return (type(obj), tuple((k, skeleton(v, leaves)) for k, v in vars(obj).items()))
     if isinstance(obj, tuple | list):
         return (type(obj), tuple(skeleton(v, leaves) for v in obj))
+    if isinstance(obj, dict):  # a model's table of structural constants (a kinematic tree's `_const`): by value
+        return (dict, tuple((k, _constant(v)) for k, v in sorted(obj.items())))
+    return _constant(obj)
+
+
+def _constant(obj: Any) -> Any:
+    """`obj` as a hashable constant of a skeleton: arrays by their bytes, an unhashable object by its identity."""
+    if isinstance(obj, np.ndarray):
+        return ("const", obj.shape, obj.dtype.str, obj.tobytes())
+    if isinstance(obj, tuple | list):
+        return (type(obj), tuple(_constant(v) for v in obj))
     try:
         hash(obj)
     except TypeError:

@@ -52,13 +52,16 @@ class RK4:
 
 @dataclass(frozen=True)
 class SolveIVP:
-    """scipy.integrate.solve_ivp with `method` ('RK45', 'DOP853', 'Radau', 'BDF', 'LSODA'), explicit tolerances, and
-    the result sampled every `dt` seconds."""
+    """Error-controlled integration with `method` ('RK45', 'RK23', 'DOP853', 'Radau', 'BDF', 'LSODA'), explicit
+    tolerances, and the result sampled every `dt` seconds: scipy.integrate.solve_ivp (`backend` "auto" or "numpy"), or
+    the same explicit Runge–Kutta pair compiled through diffrax ("jax": :mod:`robotadapt.sim.compiled_ivp`; equal to
+    scipy's run to the tolerance, not to round-off, which is why "auto" keeps scipy, the reference)."""
 
     method: str = "RK45"
     rtol: float = 1e-8
     atol: float = 1e-10
     dt: float = 1e-3
+    backend: str = "auto"
 
     def __post_init__(self) -> None:
         known = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
@@ -66,6 +69,7 @@ class SolveIVP:
             raise ConfigError("simulation.method", f"unknown method {self.method!r}; use 'rk4' or one of {known}")
         for name in ("rtol", "atol", "dt"):
             object.__setattr__(self, name, as_scalar(getattr(self, name), f"simulation.{name}", positive=True))
+        check_backend(self.backend)
 
 
 DISCRETIZATIONS = ("euler", "hold")

@@ -5,7 +5,8 @@ uses it, and the controller's monitor signals (V_φ(t), λ_min(P⁻¹(t)); the l
 
 from __future__ import annotations
 
-from dataclasses import replace
+import copy
+from dataclasses import is_dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -56,8 +57,12 @@ def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z
              logged: dict[str, Array] | None) -> tuple[dict[str, Array | None], dict[str, Array]]:
     """The record's arrays at the logged `t` (`times`: t shaped to broadcast against the runs' axes of `z`), the
     true φ there under "truth" (None when unknown, or when the law estimates none of the plant's parameters), and
-    the extra monitor series."""
+    the extra monitor series. The controller's derived constants (Γ⁻¹ for V) are cached on a copy: the caller's
+    controller stays as it was, so its next run's loop is the same loop (one compiled program, not two)."""
     ctrl, plant = loop.controller, loop.plant
+    if is_dataclass(ctrl):  # the library's laws (a user's object may not copy: it is left as it is)
+        ctrl = copy.copy(ctrl)
+        loop = ClosedLoop(plant, ctrl, loop.n)
     q, dq, x = loop.split(z)
     ref = Reference(*(a if a.shape == q.shape else np.broadcast_to(a, q.shape) for a in trajectory(times)))
     extras = dict(logged or {})

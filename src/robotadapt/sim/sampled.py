@@ -18,7 +18,8 @@ ahead, a block of ticks at a time, for both drivers). Tick k:
    at t_k, this tick unlogged;
 4. the actuator turns τ_k into the applied u_k (delay, saturation, rate limit; :mod:`robotadapt.plant.actuators`);
 5. the record of the tick: the true state s_k, x_k, u_k, τ_k, q_m, q̇_m (the drivers keep every `log_every`-th);
-6. the plant: `substeps` RK4 steps of dt = Ts/substeps of ds/dt = f(t, s, u_k); the controller's state: x_{k+1} by the
+6. the plant: `substeps` RK4 steps of dt = Ts/substeps of ds/dt = f(t, s, u_k) (a MuJoCo plant: `substeps` steps of
+   MuJoCo's own integrator, :meth:`robotadapt.plant.mujoco.MujocoPlant.advance`); the controller's state: x_{k+1} by the
    discrete rule ("euler" or "hold"), projected (a guard failing inside "hold" stops the run at t_k, this tick logged);
 7. the divergence guard on (s_{k+1}, x_{k+1}): the run stops at t_k + Ts on a non-finite state or one beyond
    `max_state` (:class:`Verdict`, codes of :data:`robotadapt.sim.loop.REASONS` and `GUARD`).
@@ -39,6 +40,7 @@ import numpy as np
 from .._array import array_namespace
 from ..controllers.base import HasProjection, SimulationStop
 from ..plant.actuators import Actuator
+from ..plant.mujoco import MujocoPlant
 from ..plant.sensors import Sensor
 from ..trajectories import Reference
 from .compiled import jax_module
@@ -246,8 +248,11 @@ class Tick:
         return repeat(xp, opts.substeps, guarded, (x, xp.asarray(True), x))
 
     def hold(self, t: Array, s: Array, u: Array) -> Array:
-        """The plant's state one control period on, under the held torque u: `substeps` RK4 steps of dt."""
+        """The plant's state one control period on, under the held torque u: `substeps` RK4 steps of dt (MuJoCo's own
+        steps of dt for a MuJoCo plant, numpy only)."""
         plant, n, h = self.loop.plant, self.loop.n, self.opts.dt
+        if isinstance(plant, MujocoPlant):
+            return plant.advance(t, s, u, self.opts.substeps, h)
 
         def f(t: Array, s: Array) -> Array:
             if self.loop.rigid:  # the state [q, q̇]: the plant's acceleration, as in the continuous loop

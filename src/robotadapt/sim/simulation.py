@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..controllers.base import Controller, HasDelayLine, NeedsAcceleration, Prepares, SimulationStop
+from ..plant.mujoco import MujocoPlant
 from ..plant.plant import Plant, same_model
 from ..trajectories import Trajectory
 from ..validation import ConfigError, as_scalar, as_vector
@@ -106,6 +107,25 @@ def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_
     return t, z, "ok"
 
 
+def mujoco_sampling(plant: MujocoPlant, integrator: RK4 | SolveIVP | Sampled) -> Sampled:
+    """The sampled-data loop a MuJoCo plant runs in: the controller every control period of a `Sampled` integrator, or
+    at every step `dt` of a continuous-time `RK4` one (Euler updates of x); MuJoCo steps `plant.timestep` (default the
+    plant step of the integrator) between ticks. Host-side: backend "auto" is numpy, "jax" an error."""
+    if isinstance(integrator, SolveIVP):
+        raise ConfigError("simulation.method", "a MuJoCo plant is stepped by MuJoCo: use method = 'rk4' (the controller "
+                          "at every step) or a control_period")
+    if integrator.backend == "jax":
+        raise ConfigError("simulation.backend", "a MuJoCo plant is stepped by MuJoCo on the host, not compiled by JAX: "
+                          "use backend = 'numpy' or 'auto'")
+    sampled = integrator if isinstance(integrator, Sampled) else Sampled(integrator.dt, integrator.dt)
+    if plant.timestep is None:
+        return Sampled(sampled.control_period, sampled.dt, sampled.discretization, "numpy")
+    try:
+        return Sampled(sampled.control_period, plant.timestep, sampled.discretization, "numpy")
+    except ConfigError as exc:
+        raise ConfigError("plant.timestep", exc.reason) from None
+
+
 def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajectory: Trajectory, *, t_final: float,
              integrator: RK4 | SolveIVP | Sampled | None = None, q0: Any = None, dq0: Any = None, x0: Any = None,
              log_every: int = 1, max_state: float = 1e6, progress: bool = False,
@@ -115,9 +135,10 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     `q0, dq0` default to zero, `x0` to `controller.initial_state()`. With :class:`RK4`, the state is logged every
     `log_every` steps; with :class:`SolveIVP` on its own output grid; with :class:`Sampled` every `log_every` control
     ticks. The run stops early, keeping its partial result, if the state becomes non-finite or exceeds `max_state`.
-    The plant's sensor, rate limit and delay act at control ticks: they need :class:`Sampled`. The result's `info`
-    records the plant's real-world effects and its model when it is not the controller's (`plant`), and the sampling
-    (`sampling`).
+    The plant's sensor, rate limit and delay act at control ticks: they need :class:`Sampled`. A MuJoCo plant
+    (:class:`~robotadapt.plant.mujoco.MujocoPlant`) runs in the sampled-data loop (:func:`mujoco_sampling`). The
+    result's `info` records the plant's real-world effects and its model when it is not the controller's (`plant`),
+    and the sampling (`sampling`).
 
     Examples
     --------
@@ -138,6 +159,8 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     if trajectory.n != n:
         raise ConfigError("trajectory", f"the trajectory has {trajectory.n} joints, the robot {n}")
     integrator = RK4() if integrator is None else integrator
+    if isinstance(plant, MujocoPlant):
+        integrator = mujoco_sampling(plant, integrator)
     t_final = as_scalar(t_final, "simulation.t_final", positive=True)
     q0 = as_vector(0.0 if q0 is None else q0, n, "plant.q0")
     dq0 = as_vector(0.0 if dq0 is None else dq0, n, "plant.dq0")
@@ -172,7 +195,13 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     wall = time.perf_counter()
     logged = None
     if isinstance(integrator, SolveIVP):
-        t, z, status = _solve_ivp(loop, trajectory, z0, integrator, t_final, max_state)
+        if integrator.backend == "jax":  # "auto" keeps scipy, the reference (sim/compiled_ivp.py)
+            from .compiled_ivp import integrate_ivp
+
+            t, z, status = integrate_ivp(loop, trajectory, z0, integrator, t_final, max_state)
+        else:
+            t, z, status = _solve_ivp(loop, trajectory, z0, integrator, t_final, max_state)
+        info["backend"] = integrator.backend.replace("auto", "numpy")
     else:
         n_steps = int(np.ceil(t_final / h - 1e-9))
         width = z0.size + (4 * n if sampled else 0)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import json
+import os
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields, is_dataclass
 from functools import cache
@@ -16,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ...plant.actuators import Actuator, DCMotor
+from ...plant.mujoco import MujocoPlant, with_options
 from ...plant.plant import Plant, sinusoidal_disturbance
 from ...plant.sensors import Sensor
 from ...plant.unmodeled import ElasticJoint, Payload
@@ -225,8 +228,38 @@ def resolved(registry: str, section: dict[str, Any], model: RobotModel | None = 
     return out
 
 
+_ROBOTS: dict[str, RobotModel] = {}  # robots built, by their section: the runs of a sweep share one
+_MAX_ROBOTS = 32
+
+
+def _robot_key(section: Any) -> str | None:
+    """A section as text, with its constructor's defaults as they are now and the modification time of a file it
+    names; None if it is not plain data."""
+    try:
+        key = json.dumps(section, sort_keys=True)
+        target, _ = REGISTRY["robot"][canonical_kind("robot", section["kind"])]
+    except (TypeError, ValueError, KeyError):
+        return None
+    ctor = _resolve(target)
+    ctor = getattr(ctor, "__init__", ctor) if isinstance(ctor, type) else ctor
+    key += f"|{ctor.__defaults__!r}|{ctor.__kwdefaults__!r}"
+    path = section.get("path") if isinstance(section, dict) else None
+    if isinstance(path, str) and os.path.isfile(path):
+        key += f"|{os.stat(path).st_mtime_ns}"
+    return key
+
+
 def robot(section: Any) -> RobotModel:
-    return build("robot", section, "robot")
+    """The model `[robot]` describes; built once per process for each section (models are immutable: building a URDF
+    arm takes some 40 ms, which a sweep of a thousand Panda runs would otherwise pay a thousand times)."""
+    key = _robot_key(section)
+    if key is None:
+        return build("robot", section, "robot")
+    if key not in _ROBOTS:
+        if len(_ROBOTS) >= _MAX_ROBOTS:
+            _ROBOTS.pop(next(iter(_ROBOTS)))
+        _ROBOTS[key] = build("robot", section, "robot")
+    return _ROBOTS[key]
 
 
 # [plant] keys beyond the true parameters, the initial state and the disturbance: flat keys of the actuator and the
@@ -257,19 +290,53 @@ def plant_keys() -> dict[str, Any]:
     dist = dict(_signature(sinusoidal_disturbance, "n"))
     payload = _signature(Payload, None)
     return {"phi": REQUIRED, "q0": 0.0, "dq0": 0.0, "disturbance": dist, "robot": REQUIRED,
-            **{key: payload[arg] for key, arg in PAYLOAD.items()}, **_signature(Actuator, "n"), **_signature(Sensor, "n")}
+            **{key: payload[arg] for key, arg in PAYLOAD.items()}, **_signature(Actuator, "n"), **_signature(Sensor, "n"),
+            "engine": "robotadapt", **MUJOCO_KEYS}
 
 
-def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray, np.ndarray, dict[str, Any]]:
-    """The true plant: `robot` (a table like [robot], default the controller's model) with `phi` in its
-    parameterization, `q0`, `dq0`, `disturbance`; a payload (`payload` kg at `payload_offset`, from `payload_time`); the
-    actuator's and the sensor's keys; `[plant.elastic_joint]` and `[plant.motor]` tables. Also the section with every
-    value used written out."""
+# [plant] keys of the MuJoCo engine (`engine = "mujoco"`) → default (None: the simulation's step, φ's columns or zero)
+MUJOCO_KEYS: dict[str, Any] = {"timestep": None, "integrator": "RK4", "actuation": "motor", "damping": None,
+                               "armature": None, "frictionloss": None, "joint_limits": False}
+ENGINES = ("robotadapt", "mujoco")
+
+
+def _mujoco(truth: RobotModel, robot_section: Any) -> dict[str, Any]:
+    """What a MuJoCo plant needs besides the truth model: the URDF file and locked joints of a URDF arm (none for the
+    book's arms)."""
+    kind = robot_section.get("kind") if isinstance(robot_section, dict) else None
+    locked = tuple(robot_section.get("locked_joints", ())) if kind in ("urdf", "example_robot") else ()
+    if kind == "urdf":
+        return {"urdf": str(robot_section["path"]), "locked_joints": locked}
+    if kind == "example_robot":
+        from importlib.metadata import distribution
+
+        from ...robots.pinocchio import EXAMPLES
+
+        relative, gripper = EXAMPLES[robot_section["name"]]
+        robots = distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data/robots")
+        return {"urdf": str(robots / relative), "locked_joints": gripper + locked}
+    return {}
+
+
+def plant(section: dict[str, Any], model: RobotModel,
+          robot_section: Any = None) -> tuple[Plant, np.ndarray, np.ndarray, dict[str, Any]]:
+    """The true plant: `robot` (a table like [robot], default the controller's model, whose table is `robot_section`)
+    with `phi` in its parameterization, `q0`, `dq0`, `disturbance`; a payload (`payload` kg at `payload_offset`, from
+    `payload_time`); the actuator's and the sensor's keys; `[plant.elastic_joint]` and `[plant.motor]` tables; `engine`
+    "robotadapt" (the project's dynamics) or "mujoco" (:class:`~robotadapt.plant.mujoco.MujocoPlant`, with MuJoCo's
+    options `MUJOCO_KEYS`). Also the section with every value used written out."""
     if not isinstance(section, dict):
         raise ConfigError("plant", "expected a table with phi, q0, dq0 and optionally disturbance")
     actuator_keys, sensor_keys = list(_params(Actuator, "n")), list(_params(Sensor, "n"))
     check_names(list(section), ["phi", "q0", "dq0", "disturbance", "robot", *PAYLOAD, *actuator_keys, *sensor_keys,
-                                *PLANT_TABLES], "plant")
+                                *PLANT_TABLES, "engine", *MUJOCO_KEYS], "plant")
+    engine = section.get("engine", "robotadapt")
+    if engine not in ENGINES:
+        raise ConfigError("plant.engine", f"expected one of {', '.join(ENGINES)}; got {engine!r}")
+    options = {key: section[key] for key in MUJOCO_KEYS if key in section}
+    if options and engine != "mujoco":
+        raise ConfigError(f"plant.{next(iter(options))}", "is an option of the MuJoCo plant: set plant.engine = "
+                          "'mujoco', or drop it")
     out = dict(section)
     truth = model
     if "robot" in section:
@@ -277,6 +344,8 @@ def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray
         if truth.n != model.n:
             raise ConfigError("plant.robot", f"has {truth.n} joints, the controller's robot {model.n}")
         out["robot"] = resolved("robot", section["robot"])
+        robot_section = section["robot"]
+    given_phi = "phi" in section
     if "phi" not in section:
         if truth.default_phi is None:
             raise ConfigError("plant.phi", f"missing: the {truth.p} true parameters {_names(truth.param_names)}")
@@ -305,8 +374,28 @@ def plant(section: dict[str, Any], model: RobotModel) -> tuple[Plant, np.ndarray
     for key, ctor in PLANT_TABLES.items():
         if isinstance(section.get(key), dict):
             out[key] = _with_defaults(section[key], _signature(ctor, "n"))
-    return Plant(truth, phi, dist, Payload(**payload) if payload else None, _table(section, "elastic_joint", n),
-                 _table(section, "motor", n), _part(Actuator, parts[0], n), _part(Sensor, parts[1], n)), q0, dq0, out
+    kwargs = dict(model=truth, phi=phi, disturbance=dist, payload=Payload(**payload) if payload else None,
+                  elastic_joint=_table(section, "elastic_joint", n), motor=_table(section, "motor", n),
+                  actuator=_part(Actuator, parts[0], n), sensor=_part(Sensor, parts[1], n))
+    if engine != "mujoco":
+        return Plant(**kwargs), q0, dq0, out
+    if not given_phi:  # the model's own parameters, with MuJoCo's options in their columns
+        kwargs["phi"] = with_options(truth, phi, options)
+        out["phi"] = kwargs["phi"].tolist()
+    out = _with_defaults({**out, "engine": engine}, MUJOCO_KEYS)
+    return MujocoPlant(**kwargs, **_mujoco(truth, robot_section), **options), q0, dq0, out
+
+
+def mujoco_view(data: dict[str, Any], the_plant: Plant) -> MujocoPlant:
+    """A MuJoCo model of a scenario's true arm (`data`: the scenario's tables) for pictures: the plant itself when MuJoCo
+    steps it, else one built from the same description."""
+    if isinstance(the_plant, MujocoPlant):
+        return the_plant
+    robot_section = data["plant"].get("robot", data["robot"])
+    try:
+        return MujocoPlant(the_plant.model, the_plant.phi_at(0.0), **_mujoco(the_plant.model, robot_section))
+    except ConfigError as exc:
+        raise ConfigError("--video", f"no MuJoCo model of this arm: {exc.reason}") from None
 
 
 # [simulation] keys → default (REQUIRED: none; None: not used unless given)
@@ -322,9 +411,6 @@ def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled
         raise ConfigError("simulation", "expected a table with t_final, dt, method")
     check_names(list(section), list(SIMULATION), "simulation", required=["t_final"])
     backend = check_backend(section.get("backend", "auto"))
-    if backend == "jax" and str(section.get("method", "rk4")).lower() != "rk4":
-        raise ConfigError("simulation.backend", "the compiled backend steps the fixed-step 'rk4' (continuous or "
-                          "sampled-data); solve_ivp methods run on numpy: drop backend or use method = 'rk4'")
     t_final = as_scalar(section["t_final"], "simulation.t_final", positive=True)
     method = section.get("method", "rk4")
     if not isinstance(method, str):
@@ -355,7 +441,8 @@ def simulation(section: dict[str, Any]) -> tuple[float, RK4 | SolveIVP | Sampled
                 raise ConfigError("simulation.rtol", "tolerances apply to solve_ivp methods, not to the fixed-step 'rk4'")
             integ = RK4(dt, backend)
         else:
-            integ = SolveIVP(method, section.get("rtol", SIMULATION["rtol"]), section.get("atol", SIMULATION["atol"]), dt)
+            integ = SolveIVP(method, section.get("rtol", SIMULATION["rtol"]), section.get("atol", SIMULATION["atol"]), dt,
+                             backend)
             used += ["rtol", "atol"]
     log_every = section.get("log_every", 1)
     if isinstance(log_every, bool) or not isinstance(log_every, int) or log_every < 1:
@@ -411,7 +498,7 @@ def setup(data: dict[str, Any]) -> Setup:
         raise ConfigError(missing[0] if len(missing) == 1 else "scenario",
                           f"missing section{'s' if len(missing) > 1 else ''} {', '.join(f'[{m}]' for m in missing)}")
     model = robot(data["robot"])
-    the_plant, q0, dq0, plant_data = plant(data["plant"], model)
+    the_plant, q0, dq0, plant_data = plant(data["plant"], model, data["robot"])
     t_final, integ, log_every, max_state, sim_data = simulation(data["simulation"])
     controller = build("controller", _truth_tables(data["controller"], the_plant, model), "controller", model)
     trajectory = build("trajectory", data["trajectory"], "trajectory", model)

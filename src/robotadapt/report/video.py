@@ -1,0 +1,97 @@
+"""A run as a movie: the arm as it moved and, as a translucent ghost, the desired pose, rendered off-screen by MuJoCo on
+the CPU (OSMesa where no display is set: `apt-get install libosmesa6`) and written as MP4 (imageio with its ffmpeg) or,
+without ffmpeg, as a GIF (Pillow).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..files import atomic_write
+from ..plant.mujoco import MujocoPlant, load_mujoco
+from ..robots import OneLinkArm, PolarArm, TwoLinkArm
+from ..sim.result import SimulationResult
+from ..validation import ConfigError
+
+GHOST_RGBA = (0.2, 0.8, 0.3, 0.35)  # the desired pose: translucent green
+
+
+def _camera(mj: Any, model: Any, data: Any, plant: MujocoPlant) -> Any:
+    """A free camera on the whole arm (`data` at its initial pose): the book's planar arms seen from +z (y up, gravity
+    down the picture), a 3-D arm from the front and a little above."""
+    camera = mj.MjvCamera()
+    camera.type = mj.mjtCamera.mjCAMERA_FREE
+    mj.mj_kinematics(model, data)
+    reach = float(np.linalg.norm(data.xpos[1:], axis=1).max()) + 0.2
+    if isinstance(plant.model, TwoLinkArm | PolarArm | OneLinkArm):
+        reach = float(getattr(plant.model, "l1", 1.0) + getattr(plant.model, "l2", 0.0))
+        camera.lookat[:], camera.distance, camera.azimuth, camera.elevation = (0.0, 0.0, 0.0), 2.8 * reach, 90.0, -90.0
+    else:
+        camera.lookat[:] = (0.0, 0.0, 0.4 * reach)
+        camera.distance, camera.azimuth, camera.elevation = 1.7 * reach, 150.0, -15.0
+    return camera
+
+
+def frames(result: SimulationResult, plant: MujocoPlant, times: Any, size: tuple[int, int] = (640, 480)) -> list[Any]:
+    """RGB frames (height, width, 3) of the run at `times` (s): the arm at q(t) and the ghost at q_des(t), both
+    interpolated between logged samples."""
+    mj = load_mujoco()
+    model = plant.engine[0]
+    width, height = size
+    model.vis.global_.offwidth, model.vis.global_.offheight = max(width, 640), max(height, 480)
+    try:
+        renderer = mj.Renderer(model, height, width)
+    except Exception as exc:  # no OpenGL: MuJoCo raises its own errors here (mujoco.FatalError, RuntimeError)
+        raise ConfigError("--video", f"MuJoCo cannot render off-screen here ({exc}); install OSMesa "
+                          "(apt-get install libosmesa6) or set MUJOCO_GL") from None
+    actual, ghost = mj.MjData(model), mj.MjData(model)
+    camera, option, perturb = _camera(mj, model, actual, plant), mj.MjvOption(), mj.MjvPerturb()
+    n, out = result.q.shape[1], []
+    with renderer:
+        for t in np.atleast_1d(times):
+            for data, series in ((actual, result.q), (ghost, result.q_des)):
+                data.qpos[:] = plant.qpos(np.array([np.interp(t, result.t, series[:, i]) for i in range(n)]))
+                mj.mj_kinematics(model, data)
+            renderer.update_scene(actual, camera)
+            scene = renderer.scene
+            first = scene.ngeom
+            mj.mjv_addGeoms(model, ghost, option, perturb, mj.mjtCatBit.mjCAT_DYNAMIC, scene)
+            for geom in range(first, scene.ngeom):
+                scene.geoms[geom].rgba[:] = GHOST_RGBA
+            out.append(renderer.render().copy())
+    return out
+
+
+def save_video(result: SimulationResult, plant: MujocoPlant, path: Path, fps: float = 30.0) -> Path:
+    """Write the run's movie in real time to `path` (`.mp4`; a `.gif` when the suffix says so or ffmpeg is missing);
+    returns the path written."""
+    images = frames(result, plant, np.arange(0.0, result.t[-1] + 1e-12, 1.0 / fps))
+    try:
+        import imageio.v2 as imageio
+        import imageio_ffmpeg  # noqa: F401 -- the MP4 writer's ffmpeg
+    except ImportError:
+        path = path.with_suffix(".gif")
+    if path.suffix.lower() == ".gif":
+        from PIL import Image
+
+        pictures = [Image.fromarray(image) for image in images]
+        atomic_write(path, lambda f: pictures[0].save(f, format="GIF", save_all=True, append_images=pictures[1:],
+                                                      duration=round(1000 / fps), loop=0), binary=True)
+        return path
+    partial = path.with_name(f".{path.stem}.partial{path.suffix}")  # ffmpeg writes a file by name: rename when done
+    imageio.mimwrite(partial, images, fps=fps, codec="libx264", macro_block_size=8)
+    os.replace(partial, path)
+    return path
+
+
+def save_frame(result: SimulationResult, plant: MujocoPlant, path: Path, t: float) -> Path:
+    """The movie's frame at time t (s) as a PNG, for a page."""
+    from PIL import Image
+
+    image = frames(result, plant, [t])[0]
+    atomic_write(path, lambda f: Image.fromarray(image).save(f, format="PNG"), binary=True)
+    return path
