@@ -145,6 +145,12 @@ AUDIT = [  # (what is wrong, command-line arguments; FILE is a scenario file wri
     ("unknown controller in --controllers", ["compare", "example-6.3.1", "--controllers", "slotine_li,nonesuch"]),
     ("PE window longer than the horizon", ["pe", "example-6.3.1", "--window", "30"]),
     ("negative PE window", ["pe", "example-6.3.1", "--window", "-1"]),
+    ("tuning a field that is not a gain", ["tune", "example-6.3.1", "--vary", "plant.phi", "--max-torque", "150"]),
+    ("unknown tuning objective", ["tune", "example-6.3.1", "--vary", "controller.Kv", "--objective", "speed"]),
+    ("tuning a law with a switching term", ["tune", "example-6.7.2", "--vary", "controller.kd"]),
+    ("compiled Radau (no diffrax counterpart)", ["run", "example-6.3.1", "--backend", "jax", "--set",
+                                                 "simulation.method='Radau'"]),
+    ("MuJoCo option without the MuJoCo engine", ["run", "example-6.3.1", "--set", "plant.damping=1"]),
 ]
 
 

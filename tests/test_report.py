@@ -86,12 +86,12 @@ def test_comparison_has_one_row_per_controller_and_embedded_figures(comparison):
     rows = [tr["data-controller"] for tr in tags["tr"] if "data-controller" in tr]
     assert rows == list(LINEUP)  # every controller of chapters 6–7 applies to the two-link arm tracking sin t
     images = [img["src"] for img in tags["img"]]
-    assert len(images) == 3 and all(src.startswith("data:image/png;base64,") for src in images)
+    assert len(images) == 4 and all(src.startswith("data:image/png;base64,") for src in images)
     for src in images:
         pixels = matplotlib.image.imread(io.BytesIO(base64.b64decode(src.split(",", 1)[1])), format="png")
         assert pixels.shape[0] > 300 and pixels.shape[1] > 600
     assert "src=\"http" not in page and "<link" not in page  # self-contained
-    for name in ("errors", "parameter_errors", "torques"):  # the same figures as files, for documents to link
+    for name in ("errors", "parameter_errors", "torques", "laws"):  # the same figures as files, for documents to link
         assert (comparison / f"{name}.png").read_bytes() in {base64.b64decode(src.split(",", 1)[1]) for src in images}
     data = json.loads((comparison / "comparison.json").read_text())
     assert [r["controller"] for r in data["rows"]] == list(LINEUP)
@@ -111,7 +111,7 @@ def test_comparison_report_renders_in_headless_chromium(comparison):
                          capture_output=True, text=True, timeout=120).stdout
     tags = elements(dom)
     assert [tr["data-controller"] for tr in tags["tr"] if "data-controller" in tr] == list(LINEUP)
-    assert len([img for img in tags["img"] if img["src"].startswith("data:image/png;base64,")]) == 3
+    assert len([img for img in tags["img"] if img["src"].startswith("data:image/png;base64,")]) == 4
     assert re.search(r"<table id=\"comparison\">.*?</table>", dom, re.S)
 
 
@@ -160,3 +160,41 @@ def test_default_comparison_on_the_two_link_arm_answers_the_books_open_question(
     for name in ("computed_torque", "pd", "pd_gravity"):
         assert rows[name]["final_error"] > 1e-2 and rows[name]["convergence_time"] is None, name
     assert rows["slotine_li"]["final_phi_error"] < 1e-6
+
+
+@pytest.fixture(scope="module")
+def fair_comparison(tmp_path_factory) -> Path:
+    """`compare --fair` on Example 6.3.1's arm, 0.5 s: a tunable law and one that is not (sign_robust)."""
+    out = tmp_path_factory.mktemp("fair")
+    code, stdout, _ = cli("compare", "example-6.3.1", "--t-final", "0.5", "--backend", "jax", "--fair",
+                          "--max-torque", "150", "--tune-runs", "4", "--controllers", "slotine_li,sign_robust",
+                          "--out", str(out))
+    assert code == 0, stdout
+    return out
+
+
+def test_fair_comparison_tunes_each_law_under_the_budget(fair_comparison):
+    data = json.loads((fair_comparison / "comparison.json").read_text())
+    assert data["fair"] == {"objective": "rms_error", "max_torque": 150.0}
+    rows = {r["controller"]: r for r in data["rows"]}
+    assert set(rows["slotine_li"]["tuned_gains"]) == {"controller.Lam", "controller.Kv", "controller.Gamma"}
+    assert rows["sign_robust"]["tuned_gains"] is None and "not tuned" in rows["sign_robust"]["note"]
+    for row in rows.values():  # the flag is the exact check of the row's own run
+        assert row["within_budget"] == (row["peak_torque"] <= 150.0)
+    page = (fair_comparison / "report.html").read_text(encoding="utf-8")
+    assert "Fair comparison" in page and "150" in page
+
+
+def test_fair_needs_a_budget(tmp_path):
+    code, _, err = cli("compare", "example-6.3.1", "--fair", "--out", str(tmp_path))
+    assert code == 2 and err.startswith("robotadapt: error: --max-torque")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary: install Debian's `chromium` package "
+                    "(apt-get install -y chromium) to render the report in a real browser")
+def test_fair_report_renders_in_headless_chromium(fair_comparison):
+    dom = subprocess.run([CHROMIUM, *CHROMIUM_FLAGS, "--dump-dom", (fair_comparison / "report.html").as_uri()],
+                         capture_output=True, text=True, timeout=120).stdout
+    tags = elements(dom)
+    assert [tr["data-controller"] for tr in tags["tr"] if "data-controller" in tr] == ["slotine_li", "sign_robust"]
+    assert "Fair comparison" in dom

@@ -6,6 +6,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._array import array_namespace
+
 if TYPE_CHECKING:
     from ..robots.base import RobotModel
     from ..robots.identifiability import BaseParameters
@@ -24,6 +26,24 @@ def lyapunov_increase(V: np.ndarray) -> float:
     if V.size < 2:
         return 0.0
     return float(max(np.max(np.diff(V)), 0.0) / max(float(V[0]), 1e-12))
+
+
+#: the objectives `robotadapt tune` minimises (docs/tuning.md) → the key of :func:`metrics` that holds each
+OBJECTIVES = {"rms_error": "rms_error_norm", "ise": "ise", "final_error": "final_error_norm", "energy": "control_energy"}
+
+
+def objective_terms(t: Any, e: Any, tau: Any) -> dict[str, Any]:
+    """The run's objectives and its peak torque from the logged samples (numpy or JAX arrays: the tuner differentiates
+    the very same code that scores a run): `rms_error` √(mean_k ‖e(t_k)‖²), `ise` ∫‖e‖² dt, `final_error` ‖e(t_final)‖,
+    `energy` ∫ τᵀτ dt (trapezoid rule over the samples) and `max_abs_torque` max over joints and samples of |τ_i(t_k)|.
+    """
+    xp = array_namespace(e, tau)
+    square = (e**2).sum(axis=-1)
+    power = (tau**2).sum(axis=-1)
+    many = t.shape[0] > 1
+    return {"rms_error": xp.sqrt(xp.mean(square)), "ise": xp.trapezoid(square, t) if many else 0.0 * square[0],
+            "final_error": xp.sqrt(square[-1]), "energy": xp.trapezoid(power, t) if many else 0.0 * power[0],
+            "max_abs_torque": xp.max(xp.abs(tau))}
 
 
 def base_of(model: RobotModel | None) -> BaseParameters | None:
@@ -66,13 +86,15 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
 
     `final_abs_error` is |e| at the last logged instant, per joint; `rms_error` the RMS of e over the logged samples,
     **per joint**: √(mean_k e_i(t_k)²), one entry per joint (rad or m); `rms_error_norm` the one scalar
-    √(mean_k ‖e(t_k)‖²) = √(Σ_i rms_error_i²), what `robotadapt compare` tabulates as "RMS ‖e‖"; `max_abs_torque`
-    max |τ| per joint; `control_energy` ∫ τᵀτ dt; `final_phi_error` ‖φ − φ̂‖ at the end when the truth is known;
-    `lyapunov_max_rel_increase` the largest step increase of V relative to V(0). With the controller's `model`, when
-    its dynamics see fewer combinations than its parameters (an n-DOF arm), also the base-parameter keys of
-    :func:`base_metrics`.
+    √(mean_k ‖e(t_k)‖²) = √(Σ_i rms_error_i²), what `robotadapt compare` tabulates as "RMS ‖e‖"; `ise` ∫‖e‖² dt;
+    `final_error_norm` ‖e(t_final)‖; `max_abs_torque` max |τ| per joint; `control_energy` ∫ τᵀτ dt (the objectives of
+    `robotadapt tune` come from :func:`objective_terms`, the same code the tuner differentiates); `final_phi_error`
+    ‖φ − φ̂‖ at the end when the truth is known; `lyapunov_max_rel_increase` the largest step increase of V relative to
+    V(0). With the controller's `model`, when its dynamics see fewer combinations than its parameters (an n-DOF arm),
+    also the base-parameter keys of :func:`base_metrics`.
     """
     e, t, tau = res.e, res.t, res.tau
+    terms = {k: float(v) for k, v in objective_terms(t, e, tau).items()}
     out: dict[str, Any] = {
         "status": res.status,
         "t_end": float(t[-1]),
@@ -81,9 +103,11 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
         "final_abs_velocity_error": _list(np.abs(res.de[-1])),
         "max_abs_error": _list(np.max(np.abs(e), axis=0)),
         "rms_error": _list(np.sqrt(np.mean(e**2, axis=0))),
-        "rms_error_norm": float(np.sqrt(np.mean(np.sum(e**2, axis=-1)))),
+        "rms_error_norm": terms["rms_error"],
+        "ise": terms["ise"],
+        "final_error_norm": terms["final_error"],
         "max_abs_torque": _list(np.max(np.abs(tau), axis=0)),
-        "control_energy": float(np.trapezoid(np.sum(tau**2, axis=-1), t)) if t.size > 1 else 0.0,
+        "control_energy": terms["energy"],
         "param_names": list(res.param_names),
         "final_phi_hat": _list(res.phi_hat[-1]),
         "wall_time_s": res.wall_time,

@@ -15,7 +15,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                          help="comma-separated names from robotadapt.studies.compare.LINEUP, e.g. "
                               "slotine_li,dcal,repetitive (default: every controller that applies; an unknown name lists "
                               "them all)")
-    compare.add_argument("--out", type=Path, help="output folder (default: results/NAME/compare)")
+    compare.add_argument("--fair", action="store_true",
+                         help="tune every law's own gains to the same --objective under the same --max-torque first "
+                              "(robotadapt tune), then compare; laws that cannot be differentiated keep the book's gains")
+    compare.add_argument("--max-torque", type=float, metavar="T", help="with --fair: the torque budget max |τ_i(t)| ≤ T")
+    compare.add_argument("--objective", default="rms_error", metavar="NAME",
+                         help="with --fair: the objective each law is tuned to (as for robotadapt tune; default rms_error)")
+    compare.add_argument("--tune-runs", type=int, default=30, metavar="N",
+                         help="with --fair: most differentiated runs per law (default 30)")
+    compare.add_argument("--out", type=Path, help="output folder (default: results/NAME/compare, or compare-fair)")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -30,10 +38,21 @@ def main(args: argparse.Namespace) -> int:
         names = [n.strip() for n in args.controllers.split(",")]
         if not all(names):
             raise ConfigError("--controllers", f"expected comma-separated names, got {args.controllers!r}")
+    if args.fair and args.max_torque is None:
+        raise ConfigError("--max-torque", "a fair comparison needs a torque budget: --fair --max-torque T")
+    if not args.fair and args.max_torque is not None:
+        raise ConfigError("--max-torque", "applies to --fair (tuning every law under the budget)")
     base = load(args.scenario, overrides(args))
-    rows, skipped = compare(base, names, progress=True)
-    out = args.out if args.out is not None else Path("results") / base.name / "compare"
-    path = write_comparison(base, rows, skipped, out)
+    if args.fair:
+        from ..studies.compare import fair
+
+        rows, skipped = fair(base, names, args.objective, args.max_torque, args.tune_runs, progress=True)
+    else:
+        rows, skipped = compare(base, names, progress=True)
+    folder = "compare-fair" if args.fair else "compare"
+    out = args.out if args.out is not None else Path("results") / base.name / folder
+    budget = {"objective": args.objective, "max_torque": args.max_torque} if args.fair else None
+    path = write_comparison(base, rows, skipped, out, budget)
     print(table_text(rows))
     for name, reason in skipped.items():
         print(f"not applicable: {name}: {reason}")

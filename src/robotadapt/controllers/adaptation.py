@@ -19,6 +19,7 @@ import numpy as np
 
 from .._array import array_namespace, quad
 from ..validation import as_gain, as_scalar
+from .base import inverse
 
 Array = Any
 
@@ -57,7 +58,7 @@ class Gradient:
 
     @cached_property
     def _Gamma_inv(self) -> Array:
-        return np.linalg.inv(self.Gamma)
+        return inverse(self.Gamma)
 
     @property
     def state_size(self) -> int:
@@ -96,7 +97,7 @@ class LandauPI:
 
     @cached_property
     def _K_I_inv(self) -> Array:
-        return np.linalg.inv(self.K_I)
+        return inverse(self.K_I)
 
     @property
     def state_size(self) -> int:
@@ -140,7 +141,7 @@ class SwitchingSigma:
 
     @cached_property
     def _Gamma_inv(self) -> Array:
-        return np.linalg.inv(self.Gamma)
+        return inverse(self.Gamma)
 
     @property
     def state_size(self) -> int:

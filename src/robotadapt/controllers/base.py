@@ -21,7 +21,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from .._array import matvec
+from .._array import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import as_gain, as_vector
@@ -173,7 +173,8 @@ def estimate(obj: Any, name: str = "phi_hat0") -> None:
 
 
 def inverse(A: Array) -> Array:
-    return np.linalg.inv(A)
+    """A⁻¹ in the namespace of A (numpy, or JAX when a compiled evaluation traces the law's derived constants)."""
+    return array_namespace(A).linalg.inv(A)
 
 
 def positive_definite(xp: Any, A: Array) -> Array:

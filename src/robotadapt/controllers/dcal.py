@@ -12,7 +12,7 @@ from .._array import array_namespace, matvec, quad
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar
-from .base import Array, errors, estimate
+from .base import Array, errors, estimate, inverse
 
 _MAX_TABLE_BYTES = 2e9
 
@@ -70,7 +70,7 @@ class DCAL:
 
     @cached_property
     def _Gamma_inv(self) -> Array:
-        return np.linalg.inv(self.Gamma)
+        return inverse(self.Gamma)
 
     @property
     def state_names(self) -> tuple[str, ...]:

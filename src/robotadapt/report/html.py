@@ -312,14 +312,77 @@ def _overlay(rows: list[Row], signal: str) -> bytes:
     return _png(overlay_figure(rows, signal))
 
 
+def laws_figure(rows: list[Row], max_torque: float | None = None) -> Figure:
+    """Small multiples, one panel per law on shared axes, so that twelve laws stay readable: ‖e(t)‖ (log, left) and
+    max_i |τ_i(t)| (right, the torque budget dotted when there is one), Slotine–Li's ‖e(t)‖ in grey behind the others;
+    the title gives RMS ‖e‖ and the peak torque."""
+    cols = min(4, max(len(rows), 1))
+    nrows = -(-len(rows) // cols)
+    fig, axes = plt.subplots(nrows, cols, figsize=(3.6 * cols, 0.8 + 2.4 * nrows), sharex=True, sharey=True,
+                             squeeze=False)
+    norms = [np.linalg.norm(r.result.e, axis=-1) for r in rows]
+    finite = np.concatenate([y[np.isfinite(y) & (y > 0)] for y in norms] or [np.ones(1)])
+    top = float(finite.max()) if finite.size else 1.0
+    peak = max([float(np.nanmax(np.abs(r.result.tau))) for r in rows if np.isfinite(r.result.tau).any()] or [1.0])
+    ref = next((i for i, r in enumerate(rows) if r.entry.name == REFERENCE), None)
+    twins = []
+    for i, (ax, row) in enumerate(zip(axes.flat, rows, strict=False)):
+        if ref is not None and i != ref:
+            ax.semilogy(rows[ref].result.t, positive(norms[ref]), color="0.8", linewidth=1.0)
+        ax.semilogy(row.result.t, positive(norms[i]), linewidth=1.3, **style(i))
+        twin = ax.twinx()
+        twin.plot(row.result.t, np.max(np.abs(row.result.tau), axis=-1), color="C3", linewidth=0.8, alpha=0.7)
+        if max_torque is not None:
+            twin.axhline(max_torque, color="C3", linestyle=":", linewidth=0.8)
+        twin.set_ylim(0, 1.1 * max(peak, max_torque or 0.0))
+        twins.append(twin)
+        over = max_torque is not None and row.metrics["peak_torque"] > max_torque
+        ax.set_title(f"{row.entry.label}\nRMS ‖e‖ {row.metrics['rms_error_norm']:.3g}, peak |τ| "
+                     f"{row.metrics['peak_torque']:.3g}{' (over)' if over else ''}", fontsize="small",
+                     color="C3" if over else "k")
+        ax.grid(True, alpha=0.3)
+    for k, twin in enumerate(twins):
+        if k % cols != cols - 1 and k != len(twins) - 1:
+            twin.tick_params(labelright=False)
+        else:
+            twin.set_ylabel("max |τ_i| (red)", fontsize="small")
+    for ax in axes.flat[len(rows):]:
+        ax.set_visible(False)
+    axes[0, 0].set_ylim(1e-10 * top, 3 * top)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("‖e(t)‖")
+    for ax in axes[-1, :]:
+        ax.set_xlabel("time $t$ (s)")
+    fig.suptitle("Each law on its own: tracking error (Slotine–Li in grey) and peak joint torque"
+                 + ("" if max_torque is None else f", budget {max_torque:g} dotted"))
+    fig.tight_layout()
+    return fig
+
+
+LAWS_TITLE = "Each law on its own: ‖e(t)‖ and peak torque"
 OVERLAYS = {"errors": ("e", "Tracking error ‖e(t)‖"),
             "parameter_errors": ("phi", "Parameter error ‖φ − φ̂(t)‖ (controllers with an estimate of the true φ)"),
             "torques": ("tau", "Control input ‖τ(t)‖")}
 
 
-def comparison_html(base: Scenario, rows: list[Row], skipped: dict[str, str], figures: dict[str, bytes]) -> str:
+def _gains_text(budget: dict[str, Any] | None, rows: list[Row]) -> str:
+    """What the gains of the report are: the book's, or tuned to one objective under one torque budget (`budget`)."""
+    if budget is None:
+        return ("The book's gains for each law on the two-link arm (or the scenario's own, for the law it uses); they "
+                "are not tuned to a common bandwidth, so the table compares the laws as the book ran them.")
+    over = [r.entry.label for r in rows if not r.metrics.get("within_budget")]
+    return (f"Fair comparison: every law's own gains tuned by <code>robotadapt tune</code> to minimise "
+            f"<code>{html.escape(str(budget['objective']))}</code> under the same torque budget max |τ_i(t)| ≤ "
+            f"{budget['max_torque']:g} (docs: tuning.md); a law that cannot be differentiated keeps the book's gains "
+            f"(its settings say why)." + (f" Over the budget: {html.escape(', '.join(over))}." if over else
+                                         " Every law stays within the budget."))
+
+
+def comparison_html(base: Scenario, rows: list[Row], skipped: dict[str, str], figures: dict[str, bytes],
+                    budget: dict[str, Any] | None = None) -> str:
     """The self-contained report: setting, table (one row per controller), definitions, the `OVERLAYS` figures
-    (PNG bytes by name) embedded."""
+    (PNG bytes by name) embedded; with `budget` (objective, max_torque) the gains are the fair comparison's tuned
+    ones."""
     s = base.setup
     head = "".join(f'<th{" class=l" if k == "label" else ""}>{html.escape(t)}</th>' for k, t, _ in COLUMNS)
     body = "".join(
@@ -333,7 +396,7 @@ def comparison_html(base: Scenario, rows: list[Row], skipped: dict[str, str], fi
                       for k in ("robot", "plant", "trajectory", "simulation"))
     skip = "".join(f"<li>{html.escape(k)}: {html.escape(v)}</li>" for k, v in skipped.items())
     images = "".join(f'<h3>{title}</h3><img alt="{title}" src="{_data_uri(figures[name])}">'
-                     for name, (_, title) in OVERLAYS.items())
+                     for name, title in [(n, t) for n, (_, t) in OVERLAYS.items()] + [("laws", LAWS_TITLE)])
     body_html = f"""<p>Scenario <b>{html.escape(base.name)}</b>: {html.escape(base.description)}</p>
 <p>Every controller runs on the same arm ({type(s.plant.model).__name__}, φ = {number_text(s.plant.phi.tolist())}), desired
 trajectory, disturbance, initial state and integrator, {s.t_final:g} s:</p><ul>{setting}</ul>
@@ -345,21 +408,23 @@ not φ); t_conv: the last time ‖e(t)‖ exceeds 1 % of its maximum (— if it 
 the whole simulation (controller, plant and RK4 stages) divided by the number of steps, on this machine.</small></p>
 {"<p>Not applicable here:</p><ul>" + skip + "</ul>" if skip else ""}
 {images}
-<h2>Gains</h2><p>The book's gains for each law on the two-link arm (or the scenario's own, for the law it uses); they are
-not tuned to a common bandwidth, so the table compares the laws as the book ran them.</p>
+<h2>Gains</h2><p>{_gains_text(budget, rows)}</p>
 <table><thead><tr><th class="l">controller</th><th class="l">source</th><th class="l">settings</th></tr></thead>
 <tbody>{gains}</tbody></table>"""
     return _page(f"robotadapt: controllers compared on {base.name}", body_html)
 
 
-def write_comparison(base: Scenario, rows: list[Row], skipped: dict[str, str], out: Path) -> Path:
-    """Write report.html (self-contained), comparison.json and the overlaid figures errors.png, parameter_errors.png,
-    torques.png into `out`; returns the report's path."""
+def write_comparison(base: Scenario, rows: list[Row], skipped: dict[str, str], out: Path,
+                     budget: dict[str, Any] | None = None) -> Path:
+    """Write report.html (self-contained), comparison.json, the overlaid figures errors.png, parameter_errors.png,
+    torques.png and the small multiples laws.png into `out`; returns the report's path. `budget`: the fair comparison's
+    objective and torque budget."""
     out = writable_dir(out)
     figures = {name: _overlay(rows, signal) for name, (signal, _) in OVERLAYS.items()}
+    figures["laws"] = _png(laws_figure(rows, None if budget is None else budget["max_torque"]))
     for name, png in figures.items():
         atomic_write(out / f"{name}.png", partial(_write_bytes, png), binary=True)
     atomic_write(out / "comparison.json", lambda f: json.dump(
-        {"scenario": base.name, "rows": [r.metrics for r in rows], "skipped": skipped}, f, indent=2))
-    atomic_write(out / "report.html", lambda f: f.write(comparison_html(base, rows, skipped, figures)))
+        {"scenario": base.name, "fair": budget, "rows": [r.metrics for r in rows], "skipped": skipped}, f, indent=2))
+    atomic_write(out / "report.html", lambda f: f.write(comparison_html(base, rows, skipped, figures, budget)))
     return out / "report.html"

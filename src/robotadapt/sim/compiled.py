@@ -105,6 +105,28 @@ def rebuild(obj: Any, leaves: Iterator[Array]) -> Any:
     return obj
 
 
+_MAPS: dict[Any, Callable[..., Any]] = {}
+
+
+def compiled_map(fn: Callable[..., Any], obj: Any, static: Any, *args: Any) -> Any:
+    """`fn(obj, static, *args)` evaluated by JAX, numpy arrays out: `obj` (a closed loop) with its float arrays passed as
+    arguments (:func:`skeleton`), so objects of one shape share one program; `static` (hashable) is part of the
+    program. A ConfigError when `fn` meets code that needs concrete values (numpy-only code)."""
+    jax = jax_module()
+    leaves: list[Array] = []
+    key = (fn, skeleton(obj, leaves), static)
+    if key not in _MAPS:
+        template = rebuild(obj, iter(leaves))
+        if len(_MAPS) >= _MAX_PROGRAMS:
+            _MAPS.pop(next(iter(_MAPS)))
+        _MAPS[key] = jax.jit(lambda arrays, *a: fn(rebuild(template, iter(arrays)), static, *a))
+    try:
+        out = _MAPS[key](leaves, *args)
+    except Exception as exc:  # tracing met code that needs concrete values
+        raise ConfigError("simulation.backend", f"{type(exc).__name__}: {str(exc)[:120]}") from None
+    return jax.tree_util.tree_map(np.asarray, out)
+
+
 SMALL = 8  # dot products and sums over at most this many terms are written out in the compiled step (`lean`)
 LEAN_MAX = 3000  # ... in steps of at most this many operations (the two-link arm's RK4 step: 820; the PUMA 560's: 6080)
 

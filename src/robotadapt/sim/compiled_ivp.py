@@ -57,7 +57,7 @@ def check_compilable(loop: ClosedLoop, method: str) -> None:
     """A ConfigError naming why this loop's error-controlled run cannot be compiled (else nothing)."""
     if method not in METHODS:
         raise ConfigError("simulation.backend", f"{method} has no compiled counterpart (diffrax has no Radau IIA, BDF "
-                          f"or LSODA); use method = {' | '.join(METHODS)} or backend = 'numpy'")
+                          f"or LSODA); use method = 'RK45', 'RK23' or 'DOP853', or backend = 'numpy'")
     if isinstance(loop.controller, HasGuard | HasDelayLine):
         raise ConfigError("simulation.backend", f"{type(loop.controller).__name__} (a guard or a delay line) runs "
                           "error-controlled on numpy only; use backend = 'numpy' or method = 'rk4'")

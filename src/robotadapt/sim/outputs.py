@@ -14,10 +14,14 @@ import numpy as np
 from .._array import matvec
 from ..controllers.base import HasFilteredError, HasInstantEstimate, HasLyapunov, HasRegressor
 from ..trajectories import Reference, Trajectory
+from ..validation import ConfigError
+from .compiled import compiled_map
 from .loop import ClosedLoop
 from .result import SimulationResult
 
 Array = Any
+COMPILED_OUTPUTS = 10**6  # logged states × parameters from which the maps are evaluated by JAX (a sweep's chunk, an
+# n-DOF arm's long run): numpy's per-call cost is then the larger, JAX's tracing the smaller
 
 def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status: str, wall: float,
             info: dict[str, Any], logged: dict[str, Array] | None = None) -> SimulationResult:
@@ -66,30 +70,59 @@ def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z
     q, dq, x = loop.split(z)
     ref = Reference(*(a if a.shape == q.shape else np.broadcast_to(a, q.shape) for a in trajectory(times)))
     extras = dict(logged or {})
+    truth = plant.truth_for(ctrl.model, times)
+    args = (times, z, ref, extras.get("q_measured"), extras.get("dq_measured"), truth)
+    traceable = plant.model.traceable and ctrl.model.traceable
+    if traceable and z.size // z.shape[-1] * max(ctrl.model.p, plant.model.p) >= COMPILED_OUTPUTS:
+        try:
+            maps = compiled_map(_maps, loop, (logged is None, t.size > 1), *args)
+        except ConfigError:  # a law with host-side code: numpy
+            maps = _maps(loop, (logged is None, t.size > 1), *args)
+    else:
+        maps = _maps(loop, (logged is None, t.size > 1), *args)
     if logged is None:
-        commanded = loop.torque(times, z, ref)
-        tau = plant.saturate(commanded)
+        tau = maps["tau"]
         if plant.actuator is not None:
-            extras["tau_commanded"] = commanded
+            extras["tau_commanded"] = maps["commanded"]
     else:
         tau = extras.pop("tau")
-    q_seen, dq_seen = extras.get("q_measured", q), extras.get("dq_measured", dq)
-    phi_hat = (ctrl.phi_hat_at(times, x, q_seen, dq_seen, ref) if isinstance(ctrl, HasInstantEstimate)
-               else ctrl.phi_hat(x))
-    truth = plant.truth_for(ctrl.model, times)
-    V = ctrl.lyapunov(times, x, q, dq, ref, truth) if isinstance(ctrl, HasLyapunov) and truth is not None else None
-    if truth is not None and phi_hat.shape[-1] != plant.model.p:
+    if truth is not None and maps["phi_hat"].shape[-1] != plant.model.p:
         truth = None  # the law estimates no parameters of the plant's: the record has no true φ
-    r = ctrl.filtered_error(times, x, q, dq, ref) if isinstance(ctrl, HasFilteredError) else None
     passivity = None
-    if isinstance(ctrl, HasRegressor) and truth is not None and t.size > 1:
-        Z, r_z = ctrl.regressor(times, x, q, dq, ref)
+    if maps["dissipation"] is not None:
         from scipy.integrate import cumulative_simpson  # here: importing the simulator stays light
 
-        passivity = cumulative_simpson(-(r_z * matvec(Z, truth - phi_hat)).sum(axis=-1), x=t, axis=0, initial=0.0)
+        passivity = cumulative_simpson(maps["dissipation"], x=t, axis=0, initial=0.0)
     extras.update(plant.extra_series(z[..., : loop.m]))
     return {"q": q, "dq": dq, "x": x, "q_des": ref.q_des, "dq_des": ref.dq_des, "ddq_des": ref.ddq_des, "tau": tau,
-            "V": V, "r": r, "phi_hat": phi_hat, "passivity": passivity, "truth": truth}, extras
+            "V": maps["V"], "r": maps["r"], "phi_hat": maps["phi_hat"], "passivity": passivity, "truth": truth}, extras
+
+
+def _maps(loop: ClosedLoop, flags: tuple[bool, bool], times: Array, z: Array, ref: Reference, q_measured: Array | None,
+          dq_measured: Array | None, truth: Array | None) -> dict[str, Array | None]:
+    """The pure maps of the controller and the plant at the logged states, array-API code (numpy, or JAX through
+    :func:`~robotadapt.sim.compiled.compiled_map`): the commanded and applied torque (continuous time, `flags[0]`), φ̂
+    as the torque uses it, V, r, and the integrand −rᵀ Z (φ − φ̂) of the passivity integral (6.4.4) (with more than
+    one sample, `flags[1]`)."""
+    ctrl, plant = loop.controller, loop.plant
+    q, dq, x = loop.split(z)
+    out: dict[str, Array | None] = {"commanded": None, "tau": None, "V": None, "r": None, "dissipation": None}
+    if flags[0]:
+        out["commanded"] = loop.torque(times, z, ref)
+        out["tau"] = plant.saturate(out["commanded"])
+    q_seen = q if q_measured is None else q_measured
+    dq_seen = dq if dq_measured is None else dq_measured
+    phi_hat = (ctrl.phi_hat_at(times, x, q_seen, dq_seen, ref) if isinstance(ctrl, HasInstantEstimate)
+               else ctrl.phi_hat(x))
+    out["phi_hat"] = phi_hat
+    if isinstance(ctrl, HasLyapunov) and truth is not None:
+        out["V"] = ctrl.lyapunov(times, x, q, dq, ref, truth)
+    if isinstance(ctrl, HasFilteredError):
+        out["r"] = ctrl.filtered_error(times, x, q, dq, ref)
+    if isinstance(ctrl, HasRegressor) and truth is not None and phi_hat.shape[-1] == plant.model.p and flags[1]:
+        Z, r_z = ctrl.regressor(times, x, q, dq, ref)
+        out["dissipation"] = -(r_z * matvec(Z, truth - phi_hat)).sum(axis=-1)
+    return out
 
 
 def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | None, extras: dict[str, Array],

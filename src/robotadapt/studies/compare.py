@@ -5,7 +5,7 @@ draws and writes the report)."""
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -204,4 +204,61 @@ def compare(base: Scenario, names: list[str] | None = None, progress: bool = Fal
         rows.append(_row(entry, progress))
         if progress:
             print(f"{entry.name}: {rows[-1].result.status}, {rows[-1].result.wall_time:.1f} s", flush=True)
+    return rows, skipped
+
+
+#: the gains a fair comparison tunes, where a law has them (the book's letters; `robotadapt.studies.tune.locate`
+#: refuses those a law derives other constants from, e.g. adaptive computed torque's K_p, K_v)
+TUNED_GAINS = ("Lam", "Kv", "Kp", "Ka", "Gamma", "P0", "K_I", "F_p", "Psi", "kL")
+
+
+def tunable(scenario: Scenario) -> list[str]:
+    """The fields of `TUNED_GAINS` in the scenario's controller (its servo, law and base too) that tuning accepts."""
+    from .gain_space import locate
+
+    def fields(section: Any, prefix: str) -> list[str]:
+        out = [f"{prefix}.{k}" for k in section if k in TUNED_GAINS]
+        return out + [f for k in ("servo", "law", "base") if isinstance(section.get(k), dict)
+                      for f in fields(section[k], f"{prefix}.{k}")]
+
+    found = []
+    for name in fields(scenario.data["controller"], "controller"):
+        try:
+            locate(scenario, name)
+        except ConfigError:
+            continue
+        found.append(name)
+    return found
+
+
+def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: float, max_runs: int,
+         progress: bool = False) -> tuple[list[Row], dict[str, str]]:
+    """The fair comparison: every entry of :func:`lineup` with its own gains tuned (`tunable`) to the same `objective`
+    under the same torque budget (:func:`robotadapt.studies.tune.tune`, at most `max_runs` runs each), then run as
+    :func:`compare` runs it. A law that cannot be differentiated keeps the book's gains, and its row says why; each row
+    holds `tuned_gains`, `within_budget` and `tune_runs`."""
+    from .tune import closed_loop, tune
+
+    entries, skipped = lineup(base, names)
+    rows = []
+    for entry in entries:
+        try:
+            closed_loop(entry.scenario)
+            fields = tunable(entry.scenario)
+            if not fields:
+                raise ConfigError("controller", "no gain of this law can be tuned")
+            tuned = tune(entry.scenario, fields, objective, max_torque, max_runs=max_runs)
+        except ConfigError as exc:
+            row = _row(replace(entry, note=f"book gains: not tuned ({exc.reason})"), progress)
+            row.metrics.update(tuned_gains=None, tune_runs=0)
+        else:
+            gains = tuned.summary()["gains"]
+            row = _row(replace(entry, scenario=tuned.scenario, source=f"{entry.source}; tuned: {', '.join(fields)}"),
+                       progress)
+            row.metrics.update(tuned_gains=gains, tune_runs=tuned.summary()["runs"])
+        row.metrics["within_budget"] = row.result.ok and row.metrics["peak_torque"] <= max_torque
+        rows.append(row)
+        if progress:
+            print(f"{entry.name}: {row.result.status}, RMS ‖e‖ {row.metrics['rms_error_norm']:.4g}, peak |τ| "
+                  f"{row.metrics['peak_torque']:.4g}, {row.metrics['tune_runs']} tuning runs", flush=True)
     return rows, skipped

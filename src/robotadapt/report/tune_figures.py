@@ -1,0 +1,88 @@
+"""The figure of a tuning (`robotadapt tune`, docs/tuning.md): the objective and the peak torque against the iteration,
+the tracking error ‖e(t)‖ and the peak joint torque max_i |τ_i(t)| before and after, and, when a surface was computed,
+the objective over a grid of two gains with the optimiser's path on it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+import matplotlib.ticker
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..files import atomic_write  # noqa: E402
+from ..studies.tune import Surface, Tuned  # noqa: E402
+from .sweep_figures import GAIN_SYMBOLS  # noqa: E402
+
+
+def gain_label(field: str) -> str:
+    """`controller.Kv` → $K_v$ (the book's letter), else the field itself."""
+    last = field.rsplit(".", 1)[-1]
+    return f"${GAIN_SYMBOLS[last]}$" if last in GAIN_SYMBOLS else field
+
+
+def tune_figure(tuned: Tuned, path: Path) -> None:
+    """Write `path` (PNG): objective and peak torque per iteration; ‖e(t)‖ and max_i |τ_i(t)| before and after (the
+    nominal plant); the objective surface over two gains with the path, when the tuning computed one."""
+    surface = tuned.surface
+    panels = 4 if surface is not None else 3
+    fig, axes = plt.subplots(1, panels, figsize=(4.6 * panels, 4.0), layout="constrained")
+    its = tuned.search.iterations
+    ax = axes[0]
+    ax.semilogy([it.objective for it in its], "o-", color="C0", label=tuned.objective.text)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel(f"objective: {tuned.objective.text}", color="C0")
+    ax.set_title(f"{len(its)} iterations, {tuned.search.runs} runs, {tuned.wall_time:.3g} s")
+    if tuned.max_torque is not None:
+        twin = ax.twinx()
+        twin.plot([it.max_abs_torque for it in its], "s--", color="C3", ms=3)
+        twin.axhline(tuned.max_torque, color="C3", lw=0.8, ls=":")
+        twin.set_ylabel("peak |τ| (N·m), budget dotted", color="C3")
+    for label, score, style in (("before", tuned.before, "--"), ("after", tuned.after, "-")):
+        res = score.result
+        axes[1].semilogy(res.t, np.linalg.norm(res.e, axis=-1), style, label=f"{label}: {score.objective:.4g}")
+        axes[2].plot(res.t, np.max(np.abs(res.tau), axis=-1), style, label=f"{label}: peak {score.max_abs_torque:.4g}")
+    top = max(float(np.max(np.linalg.norm(s.result.e, axis=-1))) for s in (tuned.before, tuned.after))
+    axes[1].set(xlabel="t (s)", ylabel="‖e(t)‖", title="tracking error (nominal plant)", ylim=(1e-8 * top, 2 * top))
+    axes[2].set(xlabel="t (s)", ylabel="max_i |τ_i(t)|", title="peak joint torque")
+    if tuned.max_torque is not None:
+        axes[2].axhline(tuned.max_torque, color="k", lw=0.8, ls=":", label=f"budget {tuned.max_torque:g}")
+    axes[1].legend(fontsize=8)
+    axes[2].legend(fontsize=8)
+    if surface is not None:
+        _surface(axes[3], tuned, surface)
+    fig.suptitle(f"robotadapt tune {tuned.scenario.name}: {tuned.objective.text}"
+                 + ("" if tuned.max_torque is None else f", max |τ| ≤ {tuned.max_torque:g}")
+                 + ("" if tuned.feasible else " (budget NOT met)"))
+    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
+    plt.close(fig)
+
+
+def _surface(ax: Any, tuned: Tuned, surface: Surface) -> None:
+    """The objective over the grid (log colours), the budget's contour with the region over it hatched, and the
+    optimiser's path (white dots, the answer a star)."""
+    X, Y = np.meshgrid(surface.x, surface.y, indexing="ij")
+    Z = np.where(np.isfinite(surface.objective), surface.objective, np.nan)
+    low, high = float(np.nanmin(Z)), float(np.nanmax(Z))
+    log = high > low > 0
+    cs = ax.contourf(X, Y, Z, levels=np.geomspace(low, high, 20) if log else 20,
+                     norm=matplotlib.colors.LogNorm(low, high) if log else None, cmap="viridis")
+    bar = plt.colorbar(cs, ax=ax, label=tuned.objective.text, format="%.3g")
+    bar.ax.minorticks_off()
+    if tuned.max_torque is not None:
+        ax.contour(X, Y, surface.max_abs_torque, levels=[tuned.max_torque], colors="r", linewidths=1.2)
+        ax.contourf(X, Y, surface.max_abs_torque, levels=[tuned.max_torque, np.inf], colors="none", hatches=["//"])
+    path = np.exp(np.array([[it.theta[surface.i], it.theta[surface.j]] for it in tuned.search.iterations]))
+    if path.size:
+        ax.plot(path[:, 0], path[:, 1], "w.-", lw=1, ms=7, zorder=3, clip_on=False)
+        ax.plot(*np.exp([tuned.theta[surface.i], tuned.theta[surface.j]]), "*", color="w", mec="k", ms=14, zorder=4,
+                clip_on=False)
+    ax.set(xscale="log", yscale="log", xlabel=gain_label(surface.x_field), ylabel=gain_label(surface.y_field),
+           title="objective surface (other gains as tuned)\nred: budget; hatched: over it")
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        axis.set_minor_formatter(matplotlib.ticker.NullFormatter())

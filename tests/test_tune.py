@@ -1,0 +1,185 @@
+"""Tuning by gradients through the closed loop (docs/tuning.md): the differentiable run against the compiled forward
+engine, its gradients against central finite differences of forward runs, the objectives against hand-written sums,
+`robotadapt tune` end to end (tuned.toml reproduced by `robotadapt run`), robust tuning, and bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from robotadapt.cli import main
+from robotadapt.sim.compiled import jax_module
+from robotadapt.sim.gradient import Rollout, replace_at
+from robotadapt.sim.loop import ClosedLoop
+from robotadapt.studies.gain_space import locate, parse_objective, tuned_scenario
+from robotadapt.studies.scenarios import load
+from robotadapt.studies.tune import Problem, optimise, score
+
+SHORT = ["simulation.t_final=1.0", "simulation.backend='jax'"]
+# (scenario, gains varied, a form of each that the test also covers): Slotine–Li with a full SPD Kv (Cholesky), a
+# diagonal Λ and a scalar Γ; the composite law's P0 enters its initial state P(0); DCAL's gains are plain numbers
+LAWS = {
+    "slotine_li": ("example-6.3.1", ["controller.Kv=[[10.0, 2.0], [2.0, 8.0]]", "controller.Lam=[2.5, 3.0]"],
+                   ["controller.Kv", "controller.Lam", "controller.Gamma"]),
+    "composite": ("example-6.6.3", [], ["controller.Lam", "controller.Kv", "controller.P0", "controller.a"]),
+    "dcal": ("example-7.2.1", [], ["controller.Kv", "controller.Kp", "controller.Ka", "controller.Gamma"]),
+}
+
+
+def law(name: str):
+    scenario_name, sets, fields = LAWS[name]
+    scenario = load(scenario_name, SHORT + sets)
+    return scenario, [locate(scenario, f) for f in fields]
+
+
+@pytest.mark.parametrize("name", list(LAWS))
+def test_the_differentiable_run_is_the_compiled_forward_run(name):
+    scenario, _ = law(name)
+    s = scenario.setup
+    reference = scenario.run()
+    ctrl = s.controller.prepare(s.trajectory, s.integrator.dt, s.t_final) if hasattr(s.controller, "prepare") \
+        else s.controller
+    loop = ClosedLoop(s.plant, ctrl, s.plant.model.n)
+    z0 = np.concatenate([s.plant.initial_state(s.q0, s.dq0), ctrl.initial_state(s.q0, s.dq0)])
+    t, e, tau, _ = Rollout.make(s.trajectory, s.integrator.dt, s.t_final, s.log_every).signals(loop, s.trajectory, z0)
+    np.testing.assert_array_equal(t, reference.t)
+    np.testing.assert_allclose(np.asarray(e), reference.e, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(tau), reference.tau, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", list(LAWS))
+def test_gradients_equal_central_differences_of_forward_runs(name):
+    """jax.grad through the checkpointed scan against (J(θ + h) − J(θ − h)) / 2h of the normal forward engine."""
+    scenario, gains = law(name)
+    goal = parse_objective("rms_error+1e-6*energy")
+    problem = Problem(scenario, gains, goal, None)
+    theta = problem.theta0
+    _, grad, objective, *_ = problem.evaluate(theta)
+    assert objective == pytest.approx(score(scenario, goal).objective, rel=1e-9)
+    h = 1e-5
+    fd = np.empty_like(theta)
+    for k in range(theta.size):
+        up, down = theta.copy(), theta.copy()
+        up[k] += h
+        down[k] -= h
+        fd[k] = (score(tuned_scenario(scenario, gains, up), goal).objective
+                 - score(tuned_scenario(scenario, gains, down), goal).objective) / (2 * h)
+    assert np.max(np.abs(grad - fd)) <= 1e-5 * np.max(np.abs(fd)), (grad, fd)
+
+
+def test_objectives_are_the_hand_written_sums():
+    scenario = load("example-6.3.1", SHORT)
+    res = scenario.run()
+    goal = parse_objective("ise + 2*final_error+1e-3*energy")
+    e2 = np.sum(res.e**2, axis=1)
+    power = np.sum(res.tau**2, axis=1)
+    dt = np.diff(res.t)
+    by_hand = (np.sum(dt * (e2[1:] + e2[:-1]) / 2) + 2 * np.sqrt(e2[-1])
+               + 1e-3 * np.sum(dt * (power[1:] + power[:-1]) / 2))
+    assert score(scenario, goal).objective == pytest.approx(by_hand, rel=1e-12)
+    assert score(scenario, parse_objective("rms_error")).objective == pytest.approx(np.sqrt(np.mean(e2)), rel=1e-12)
+
+
+def test_gains_stay_positive_definite_and_round_trip():
+    scenario, gains = law("slotine_li")
+    kv = gains[0]
+    assert kv.form == "matrix" and gains[1].form == "diagonal" and gains[2].form == "scalar"
+    np.testing.assert_allclose(kv.gain(kv.theta0()), [[10.0, 2.0], [2.0, 8.0]], rtol=1e-14)
+    for theta in np.random.default_rng(1).normal(scale=3.0, size=(20, kv.size)):
+        assert np.all(np.linalg.eigvalsh(kv.gain(theta)) > 0)
+    jnp = jax_module().numpy
+    np.testing.assert_allclose(np.asarray(kv.gain(jnp.asarray(kv.theta0()))), kv.gain(kv.theta0()), rtol=1e-14)
+
+
+def test_a_gain_the_law_derives_constants_from_is_refused():
+    """Adaptive computed torque solves AᵀP + PA = −Q from K_p, K_v at construction: not a gain to differentiate."""
+    scenario = load("example-6.2.2", SHORT)
+    with pytest.raises(Exception, match="derives other constants"):
+        locate(scenario, "controller.Kp")
+
+
+def test_tune_writes_files_and_run_reproduces_the_objective(tmp_path, capsys):
+    out = tmp_path / "tune"
+    code = main(["tune", "example-6.3.1", "--t-final", "1", "--backend", "jax", "--vary", "controller.Kv=2:50",
+                 "--vary", "controller.Lam=0.5:10", "--vary", "controller.Gamma=0.05:2", "--objective", "rms_error",
+                 "--max-torque", "150", "--max-runs", "10", "--surface", "3", "--out", str(out)])
+    assert code == 0, capsys.readouterr()
+    summary = json.loads((out / "tune.json").read_text())
+    assert (out / "tune.png").stat().st_size > 0
+    assert set(summary) >= {"objective", "max_abs_torque", "gains", "iterations", "wall_time"}
+    assert summary["runs"] <= 10 + 2 and summary["max_abs_torque"] <= 150  # + the start and the answer, scored
+    assert all({"objective", "max_abs_torque", "gradient_norm"} <= set(it) for it in summary["iterations"])
+    assert summary["initial"]["max_abs_torque"] > 150 and summary["feasible"]
+    assert main(["run", str(out / "tuned.toml"), "--out", str(tmp_path / "run"), "--no-plots"]) == 0
+    m = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert m["rms_error_norm"] == pytest.approx(summary["objective"], rel=1e-9, abs=0)
+    assert max(m["max_abs_torque"]) <= 150
+    grid = summary["surface"]  # a corner of the 3 × 3 surface against a forward run with those gains
+    (x_key, xs), (y_key, ys) = next(iter(grid["x"].items())), next(iter(grid["y"].items()))
+    corner = load(str(out / "tuned.toml"), [f"{x_key}={xs[-1]!r}", f"{y_key}={ys[0]!r}"]).run()
+    assert grid["objective"][-1][0] == pytest.approx(np.sqrt(np.mean(np.sum(corner.e**2, axis=1))), rel=1e-9)
+
+
+def test_a_budget_no_gains_meet_keeps_the_best_and_exits_1(tmp_path, capsys):
+    out = tmp_path / "tune"
+    code = main(["tune", "example-6.3.1", "--t-final", "0.5", "--vary", "controller.Kv", "--max-torque", "1",
+                 "--max-runs", "4", "--out", str(out), "--no-plots"])
+    assert code == 1
+    assert "no gains found meet the budget" in capsys.readouterr().out
+    assert (out / "tuned.toml").exists() and json.loads((out / "tune.json").read_text())["feasible"] is False
+
+
+def test_robust_tuning_averages_over_drawn_true_parameters(tmp_path):
+    scenario = load("example-6.3.1", ["simulation.t_final=0.5"])
+    goal = parse_objective("rms_error")
+    phis = np.array([[0.6, 2.0], [1.0, 2.6]])
+    problem = Problem(scenario, [locate(scenario, "controller.Kv")], goal, None, phis)
+    _, _, objective, peak, _, _ = problem.evaluate(problem.theta0)
+    each = [score(load("example-6.3.1", ["simulation.t_final=0.5", f"plant.phi={p.tolist()}"]), goal) for p in phis]
+    assert objective == pytest.approx(np.mean([s.objective for s in each]), rel=1e-9)
+    assert peak == pytest.approx(max(s.max_abs_torque for s in each), rel=1e-9)
+
+
+def test_fewer_runs_beat_a_random_search_over_the_same_box():
+    """The fast version of benchmarks/bench_tune.py: on Example 6.3.1 (2 s) under a 150 N·m budget, the tuner beats the
+    best feasible one of 120 random gains drawn uniformly in the same box, simulating at most 12 runs."""
+    box = {"controller.Kv": (2.0, 50.0), "controller.Lam": (0.5, 10.0), "controller.Gamma": (0.05, 2.0)}
+    scenario = load("example-6.3.1", ["simulation.t_final=2.0", "simulation.backend='jax'"])
+    goal, budget = parse_objective("rms_error"), 150.0
+    problem = Problem(scenario, [locate(scenario, f"{k}={lo}:{hi}") for k, (lo, hi) in box.items()], goal, budget)
+    lo, hi = np.array(list(box.values())).T
+    objective, peak = problem.objectives(np.log(np.random.default_rng(0).uniform(lo, hi, size=(120, 3))))
+    best_random = np.nanmin(np.where(peak <= budget, objective, np.nan))
+    search = optimise(problem, 12)
+    after = score(tuned_scenario(scenario, problem.gains, search.best(budget)), goal)
+    assert search.runs <= 12 and after.max_abs_torque <= budget
+    assert after.objective < best_random
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--vary", "controller.phi_hat0"], "controller.phi_hat0: is not a gain"),
+    (["--vary", "plant.phi"], "--vary: 'plant.phi' is not a gain"),
+    (["--vary", "controller.Kv", "--objective", "speed"], "--objective: unknown objective 'speed'"),
+    (["--vary", "controller.Kv", "--max-torque", "-3"], "--max-torque: must be a positive"),
+    (["--vary", "controller.Kv", "--over", "plant.q0=0:1"], "--over: robust tuning draws the true parameters"),
+    (["--vary", "controller.Kv", "--set", "controller={kind = 'sign_robust', kd = 1.0, base = {kind = 'slotine_li', "
+      "Lam = 2.5, Kv = 10.0, Gamma = 20.0}}"], "switches"),
+    (["--vary", "controller.Kv", "--set", "simulation.method='RK45'"], "simulation.method: tuning differentiates"),
+    (["--vary", "controller.Kv", "--surface", "5"], "--surface: needs two scalar gains"),
+    (["--vary", "controller.Kv", "--objective", "0*energy"], "--objective: unknown objective"),
+    (["--vary", "controller.Kv=5"], "--vary: expected section.key=lo:hi"),
+])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, args, message):
+    assert main(["tune", "example-6.3.1", "--t-final", "0.2", *args, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+
+
+def test_the_replaced_gain_reaches_the_step():
+    scenario = load("example-6.3.1", SHORT)
+    loop = ClosedLoop(scenario.setup.plant, scenario.setup.controller, 2)
+    other = replace_at(loop, ("controller", "Kv"), 3.0 * np.eye(2))
+    assert other.controller.Kv[0, 0] == 3.0 and loop.controller.Kv[0, 0] == 10.0
+    assert other.plant is loop.plant
