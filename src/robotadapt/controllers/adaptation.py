@@ -118,40 +118,25 @@ class LandauPI:
 
 
 @dataclass(frozen=True, eq=False)
-class SwitchingSigma:
+class SwitchingSigma(Gradient):
     """Switching σ-modification of Reed & Ioannou (6.7.13)–(6.7.14):
 
     dφ̂/dt = Γ Zᵀ r − σ_s S φ̂,   σ_s = σ0 · clip(‖φ̂‖/φ0 − 1, 0, 1)
 
     with S = I (the book's form, σ0 = 1) or S = Γ (`scaled = true`, Ioannou's form). φ0 > ‖φ‖ is an a-priori bound on
     the true parameters (6.7.15). The leakage keeps φ̂ bounded under disturbances; the tracking error then only enters a
-    residual set (docs/laws.md#sigma-modification).
+    residual set (docs/laws.md#sigma-modification). The gradient law with a leak: its state, estimate and V are the
+    gradient law's (½ φ̃ᵀ Γ⁻¹ φ̃).
     """
 
-    p: int
-    Gamma: Any
     phi0: Any
     sigma0: Any = 1.0
     scaled: bool = False
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "Gamma", as_gain(self.Gamma, self.p, "controller.law.Gamma"))
+        super().__post_init__()
         object.__setattr__(self, "phi0", as_scalar(self.phi0, "controller.law.phi0", positive=True))
         object.__setattr__(self, "sigma0", as_scalar(self.sigma0, "controller.law.sigma0", positive=True))
-
-    @cached_property
-    def _Gamma_inv(self) -> Array:
-        return inverse(self.Gamma)
-
-    @property
-    def state_size(self) -> int:
-        return self.p
-
-    def initial_state(self, phi_hat0: Array) -> Array:
-        return np.array(phi_hat0, dtype=float)
-
-    def estimate(self, xa: Array, y: Array) -> Array:
-        return xa
 
     def sigma(self, xa: Array) -> Array:
         """σ_s of (6.7.14): 0 inside ‖φ̂‖ < φ0, a linear ramp to σ0 at 2φ0, σ0 beyond."""
@@ -162,6 +147,3 @@ class SwitchingSigma:
     def derivative(self, xa: Array, y: Array) -> Array:
         leak = xa @ self.Gamma.T if self.scaled else xa
         return y @ self.Gamma.T - self.sigma(xa)[..., None] * leak
-
-    def lyapunov(self, xa: Array, phi: Array) -> Array:
-        return 0.5 * quad(phi - xa, self._Gamma_inv)

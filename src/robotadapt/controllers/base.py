@@ -17,6 +17,7 @@ instead (traced code cannot raise). Either way the simulator ends the run there 
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -170,6 +171,31 @@ def gains(obj: Any, names: tuple[str, ...], dim: int) -> None:
 def estimate(obj: Any, name: str = "phi_hat0") -> None:
     """Validate a parameter-estimate field against the model's parameter count."""
     freeze(obj, **{name: as_vector(getattr(obj, name), obj.model.p, f"controller.{name}", broadcast=False)})
+
+
+class EstimateState:
+    """The state and Γ⁻¹ of a law whose state x is φ̂ itself, adapted with a gain Γ (Slotine–Li, adaptive computed
+    torque, DCAL: Tables 6.3.1, 6.2.1, 7.2.1). A mixin of the laws' dataclasses, which hold `model`, `Gamma` and
+    `phi_hat0`."""
+
+    model: RobotModel
+    Gamma: Array
+    phi_hat0: Array
+
+    @cached_property
+    def _Gamma_inv(self) -> Array:
+        """Γ⁻¹, for V's parameter term ½ φ̃ᵀ Γ⁻¹ φ̃."""
+        return inverse(self.Gamma)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return tuple(f"{name}_hat" for name in self.model.param_names)
+
+    def initial_state(self, q0: Array, dq0: Array) -> Array:
+        return self.phi_hat0.copy()
+
+    def phi_hat(self, x: Array) -> Array:
+        return x
 
 
 def inverse(A: Array) -> Array:

@@ -22,11 +22,11 @@ from .._array import array_namespace, matvec, quad, solve
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_vector
-from .base import Array, SimulationStop, errors, estimate, freeze, gains, inverse, positive_definite
+from .base import Array, EstimateState, SimulationStop, errors, estimate, freeze, gains, positive_definite
 
 
 @dataclass(frozen=True, eq=False)
-class AdaptiveComputedTorque:
+class AdaptiveComputedTorque(EstimateState):
     """Adaptive computed torque (Table 6.2.1).
 
     τ = M̂(q)(q̈_d + K_v ė + K_p e) + V̂_m q̇ + Ĝ + F̂ = Y(q, q̇, q̇, q̈_d + K_v ė + K_p e) φ̂   (6.2.5)
@@ -126,17 +126,6 @@ class AdaptiveComputedTorque:
     def _BtP(self) -> Array:
         """Bᵀ P = [P12ᵀ, P22], shape (n, 2n)."""
         return self.lyapunov_pair[0][self.model.n :, :]
-
-    @cached_property
-    def _Gamma_inv(self) -> Array:
-        return inverse(self.Gamma)
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return tuple(f"{name}_hat" for name in self.model.param_names)
-
-    def initial_state(self, q0: Array, dq0: Array) -> Array:
-        return self.phi_hat0.copy()
 
     def phi_hat(self, x: Array) -> Array:
         """φ̂: the state clipped into the box (the state itself without bounds)."""

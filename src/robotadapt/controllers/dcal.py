@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -12,7 +11,7 @@ from .._array import array_namespace, matvec, quad
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar
-from .base import Array, errors, estimate, inverse
+from .base import Array, EstimateState, errors, estimate
 
 _MAX_TABLE_BYTES = 2e9
 
@@ -38,7 +37,7 @@ class DesiredRegressorTable:
 
 
 @dataclass(frozen=True, eq=False)
-class DCAL:
+class DCAL(EstimateState):
     """Desired compensation adaptation law (Table 7.2.1):
 
     r = ė + e                                                (7.2.6)
@@ -67,20 +66,6 @@ class DCAL:
         if not isinstance(self.precompute, bool):
             raise ConfigError("controller.precompute", f"expected true or false, got {self.precompute!r}")
         estimate(self)
-
-    @cached_property
-    def _Gamma_inv(self) -> Array:
-        return inverse(self.Gamma)
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return tuple(f"{name}_hat" for name in self.model.param_names)
-
-    def initial_state(self, q0: Array, dq0: Array) -> Array:
-        return self.phi_hat0.copy()
-
-    def phi_hat(self, x: Array) -> Array:
-        return x
 
     def prepare(self, trajectory: Any, dt: float, t_final: float) -> DCAL:
         """With `precompute`, tabulate Y_d at every RK4 stage instant of the run (half steps up to t_final)."""

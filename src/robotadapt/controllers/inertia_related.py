@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
 from .._array import matvec, quad
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from .base import Array, errors, estimate, gains, inverse, slotine_li_regressor
+from .base import Array, EstimateState, errors, estimate, gains, slotine_li_regressor
 
 
 @dataclass(frozen=True, eq=False)
-class InertiaRelated:
+class InertiaRelated(EstimateState):
     """Slotine–Li: the adaptive inertia-related controller (Table 6.3.1).
 
     r = ė + Λe                                         (6.3.8)
@@ -35,20 +34,6 @@ class InertiaRelated:
         gains(self, ("Lam", "Kv"), self.model.n)
         gains(self, ("Gamma",), self.model.p)
         estimate(self)
-
-    @cached_property
-    def _Gamma_inv(self) -> Array:
-        return inverse(self.Gamma)
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return tuple(f"{name}_hat" for name in self.model.param_names)
-
-    def initial_state(self, q0: Array, dq0: Array) -> Array:
-        return self.phi_hat0.copy()
-
-    def phi_hat(self, x: Array) -> Array:
-        return x
 
     def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         e, de = errors(q, dq, ref)
