@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from ..validation import ConfigError
+from ..validation import ConfigError, as_vector
 
 Array = Any
 #: the order of a link's standard parameters (Pinocchio's `Inertia.toDynamicParameters` order)
@@ -72,6 +72,15 @@ class SerialChain:
     def param_names(self) -> tuple[str, ...]:
         names = [f"{p}{i + 1}" for i in range(self.n) for p in LINK_PARAMS]
         return tuple(names + [f"{EXTRA_NAMES[e]}{i + 1}" for e in self.extras for i in range(self.n)])
+
+    def _check_extras(self) -> None:
+        """Validate the optional groups given (n values each, none negative) and store them as arrays."""
+        for name in EXTRAS:
+            if getattr(self, name) is not None:
+                values = as_vector(getattr(self, name), self.n, f"robot.{name}")
+                if np.any(values < 0):
+                    raise ConfigError(f"robot.{name}", f"must be zero or positive, got {values}")
+                object.__setattr__(self, name, values)
 #: the generated functions: name → (argument names, whether the last argument is φ)
 FUNCTIONS = {"regressor": ("q", "dq", "v", "a"), "momentum": ("q", "dq"), "remainder": ("q", "dq"),
              "mass": ("q", "phi"), "coriolis": ("q", "dq", "phi"), "gravity": ("q", "phi")}

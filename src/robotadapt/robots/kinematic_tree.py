@@ -41,7 +41,6 @@ arrays in `_const`, a dict, which the compiled engine's skeleton keeps as consta
 
 from __future__ import annotations
 
-import importlib.metadata
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -237,12 +236,7 @@ class KinematicTree(SerialChain, RobotModel):
         if np.abs(np.linalg.norm(self.axis, axis=-1) - 1.0).max() > 1e-9:
             raise ConfigError("robot.axis", f"every joint axis must be a unit vector, got {self.axis.tolist()}")
         set_(self, "g", as_vector(self.g, 3, "robot.g", broadcast=False))
-        for name in EXTRAS:
-            if getattr(self, name) is not None:
-                values = as_vector(getattr(self, name), n, f"robot.{name}")
-                if np.any(values < 0):
-                    raise ConfigError(f"robot.{name}", f"must be zero or positive, got {values}")
-                set_(self, name, values)
+        self._check_extras()
         if self.q_limits is not None:
             limits = np.asarray(self.q_limits, dtype=float)
             if limits.shape != (n, 2) or np.any(np.isnan(limits)) or np.any(limits[:, 0] >= limits[:, 1]):
@@ -321,18 +315,10 @@ class KinematicTree(SerialChain, RobotModel):
     def example(cls, name: str, locked: Sequence[str] = (), rotor_inertia: bool = False, viscous: bool = False,
                 coulomb: bool = False) -> KinematicTree:
         """An arm of `example-robot-data` (offline, `robotadapt.robots.pinocchio.EXAMPLES`), grippers locked."""
-        from .pinocchio import EXAMPLES
+        from .pinocchio import example_urdf
 
-        if not isinstance(name, str) or name not in EXAMPLES:
-            raise ConfigError("robot.name", f"unknown example robot {name!r}; known: {', '.join(EXAMPLES)}")
-        try:
-            dist = importlib.metadata.distribution("example-robot-data")
-        except importlib.metadata.PackageNotFoundError:
-            raise ConfigError("robot.kind", "example robots need example-robot-data: pip install 'robotadapt[urdf]'"
-                              ) from None
-        relative, gripper = EXAMPLES[name]
-        path = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))) / relative
-        return replace(cls.from_urdf(path, tuple(gripper) + tuple(locked), rotor_inertia, viscous, coulomb), name=name)
+        path, gripper = example_urdf(name)
+        return replace(cls.from_urdf(path, gripper + tuple(locked), rotor_inertia, viscous, coulomb), name=name)
 
     @classmethod
     def from_dh(cls, links: Sequence[dict[str, Any]], convention: str = "standard",

@@ -63,6 +63,19 @@ def _pin() -> Any:
     return pinocchio
 
 
+def example_urdf(name: Any) -> tuple[Path, tuple[str, ...]]:
+    """The URDF file of the example-robot-data arm `name` (`EXAMPLES`, installed offline) and its gripper joints."""
+    if not isinstance(name, str) or name not in EXAMPLES:
+        raise ConfigError("robot.name", f"unknown example robot {name!r}; known: {', '.join(EXAMPLES)}")
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        raise ConfigError("robot.kind", "example robots need example-robot-data: pip install 'robotadapt[urdf]'"
+                          ) from None
+    relative, gripper = EXAMPLES[name]
+    return Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))) / relative, tuple(gripper)
+
+
 def urdf_model(path: Any, locked: Any, gravity: Any, path_field: str, locked_field: str) -> Any:
     """Pinocchio's model of the URDF file `path`, the joints named in `locked` fixed at their neutral position, and
     `gravity` (3 numbers, base axes; None: Pinocchio's (0, 0, −9.81)); bad input is a ConfigError naming `path_field`
@@ -152,17 +165,9 @@ class PinocchioArm(RobotModel):
                 gravity: Any = None) -> PinocchioArm:
         """An arm shipped by `example-robot-data` (offline), see `EXAMPLES`; its gripper joints are locked, and
         `locked_joints` lists further joints to lock."""
-        if not isinstance(name, str) or name not in EXAMPLES:
-            raise ConfigError("robot.name", f"unknown example robot {name!r}; known: {', '.join(EXAMPLES)}")
-        try:
-            dist = importlib.metadata.distribution("example-robot-data")
-        except importlib.metadata.PackageNotFoundError:
-            raise ConfigError("robot.kind", "example robots need example-robot-data: pip install 'robotadapt[urdf]'"
-                              ) from None
+        path, gripper = example_urdf(name)
         if not isinstance(locked_joints, list | tuple):
             raise ConfigError("robot.locked_joints", f"expected a list of joint names, got {locked_joints!r}")
-        relative, gripper = EXAMPLES[name]
-        path = Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots"))) / relative
         return replace(cls.from_urdf(path, gripper + tuple(locked_joints), viscous, coulomb, gravity), name=name)
 
     # the RobotModel contract -----------------------------------------------------------------------------------------

@@ -75,12 +75,7 @@ class SymbolicArm(SerialChain, RobotModel):
         for i in range(n):
             check_spd(inertia[i], f"robot.inertia[{i}]", semidefinite=True)
         set_(self, "inertia", inertia)
-        for name in EXTRAS:
-            if getattr(self, name) is not None:
-                values = as_vector(getattr(self, name), n, f"robot.{name}")
-                if np.any(values < 0):
-                    raise ConfigError(f"robot.{name}", f"must be zero or positive, got {values}")
-                set_(self, name, values)
+        self._check_extras()
         if self.q_limits is not None:
             limits = _table(self.q_limits, (n, 2), "robot.q_limits")
             if np.any(limits[:, 0] >= limits[:, 1]):
