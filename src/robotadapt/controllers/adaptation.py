@@ -46,8 +46,22 @@ class UpdateLaw(Protocol):
         """The parameter part of the controller's Lyapunov function for the true φ (monitors only)."""
 
 
+class EstimateLaw:
+    """The state of a law that keeps one vector of p parameters (φ̂ or φ̂_I), starting at φ̂(0): a mixin of the laws'
+    dataclasses, which hold `p`."""
+
+    p: int
+
+    @property
+    def state_size(self) -> int:
+        return self.p
+
+    def initial_state(self, phi_hat0: Array) -> Array:
+        return np.array(phi_hat0, dtype=float)
+
+
 @dataclass(frozen=True, eq=False)
-class Gradient:
+class Gradient(EstimateLaw):
     """Gradient law of Example 6.4.1: dφ̂/dt = Γ Zᵀ r. Passive with β = ½ φ̃(0)ᵀ Γ⁻¹ φ̃(0) (docs/laws.md#gradient)."""
 
     p: int
@@ -59,13 +73,6 @@ class Gradient:
     @cached_property
     def _Gamma_inv(self) -> Array:
         return inverse(self.Gamma)
-
-    @property
-    def state_size(self) -> int:
-        return self.p
-
-    def initial_state(self, phi_hat0: Array) -> Array:
-        return np.array(phi_hat0, dtype=float)
 
     def estimate(self, xa: Array, y: Array) -> Array:
         return xa
@@ -79,7 +86,7 @@ class Gradient:
 
 
 @dataclass(frozen=True, eq=False)
-class LandauPI:
+class LandauPI(EstimateLaw):
     """Landau's PI adaptation, (6.4.20) with F_I(t) = K_I (6.4.21):
 
     φ̂ = φ̂_I + F_p Zᵀ r,   dφ̂_I/dt = K_I Zᵀ r,   φ̂_I(0) = φ̂(0).
@@ -98,13 +105,6 @@ class LandauPI:
     @cached_property
     def _K_I_inv(self) -> Array:
         return inverse(self.K_I)
-
-    @property
-    def state_size(self) -> int:
-        return self.p
-
-    def initial_state(self, phi_hat0: Array) -> Array:
-        return np.array(phi_hat0, dtype=float)
 
     def estimate(self, xa: Array, y: Array) -> Array:
         return xa + y @ self.F_p.T

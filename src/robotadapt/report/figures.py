@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -178,30 +178,30 @@ def _title(title: str, what: str) -> str:
     return f"{title} — {what}" if title else what[:1].upper() + what[1:]
 
 
-def tracking_error_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
-    """e_i(t) = q_d,i − q_i for every joint: one panel per joint type (rad for revolute, m for prismatic joints)."""
-    groups = joint_groups(res.e.shape[-1], joint_types(model) if model is not None else None)
+def _joint_panels(values: np.ndarray, t: np.ndarray, symbol: str, ylabel: Callable[[str], str], title: str,
+                  model: Any) -> Figure:
+    """One signal per joint, `values` `(T, n)` labelled `symbol`_i: a panel per joint type, `ylabel(kind)` on each."""
+    groups = joint_groups(values.shape[-1], joint_types(model) if model is not None else None)
     fig, axes = _panels(len(groups))
     for ax, (kind, joints) in zip(axes, groups, strict=True):
         for i in joints:
-            ax.plot(res.t, res.e[:, i], label=f"$e_{{{i + 1}}}$", **style(i))
-        ax.set_ylabel(f"tracking error $e_i$ ({POSITION[kind]})")
+            ax.plot(t, values[:, i], label=f"${symbol}_{{{i + 1}}}$", **style(i))
+        ax.set_ylabel(ylabel(kind))
         if len(groups) > 1:
             ax.set_title(JOINT_NAME[kind].removesuffix("s" if len(joints) == 1 else ""), fontsize="medium")
-    return _finish(fig, axes, _title(title, "tracking error $e = q_d - q$"))
+    return _finish(fig, axes, title)
+
+
+def tracking_error_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
+    """e_i(t) = q_d,i − q_i for every joint: one panel per joint type (rad for revolute, m for prismatic joints)."""
+    return _joint_panels(res.e, res.t, "e", lambda kind: f"tracking error $e_i$ ({POSITION[kind]})",
+                         _title(title, "tracking error $e = q_d - q$"), model)
 
 
 def torques_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
     """Controller output τ_i(t): torques (N·m) at revolute joints, forces (N) at prismatic ones, a panel each."""
-    groups = joint_groups(res.tau.shape[-1], joint_types(model) if model is not None else None)
-    fig, axes = _panels(len(groups))
-    for ax, (kind, joints) in zip(axes, groups, strict=True):
-        for i in joints:
-            ax.plot(res.t, res.tau[:, i], label=f"$\\tau_{{{i + 1}}}$", **style(i))
-        ax.set_ylabel(f"{EFFORT_NAME[kind]} $\\tau_i$ ({EFFORT[kind]})")
-        if len(groups) > 1:
-            ax.set_title(JOINT_NAME[kind].removesuffix("s" if len(joints) == 1 else ""), fontsize="medium")
-    return _finish(fig, axes, _title(title, "control input $\\tau$"))
+    return _joint_panels(res.tau, res.t, "\\tau", lambda kind: f"{EFFORT_NAME[kind]} $\\tau_i$ ({EFFORT[kind]})",
+                         _title(title, "control input $\\tau$"), model)
 
 
 def _many_parameters(res: SimulationResult, ax: Any) -> None:

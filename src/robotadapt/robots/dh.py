@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from .._array import array_namespace
 from ..validation import ConfigError, as_vector
 
 Array = Any
@@ -58,6 +59,9 @@ class SerialChain:
     has (a field of that name, None when absent). A mixin: the models are dataclasses with these fields."""
 
     joints: str  # one letter per joint, "R" or "P"
+    rotor_inertia: Array | None  # the optional groups' values (`EXTRAS`), None when absent
+    viscous: Array | None
+    coulomb: Array | None
 
     @property
     def n(self) -> int:
@@ -72,6 +76,22 @@ class SerialChain:
     def param_names(self) -> tuple[str, ...]:
         names = [f"{p}{i + 1}" for i in range(self.n) for p in LINK_PARAMS]
         return tuple(names + [f"{EXTRA_NAMES[e]}{i + 1}" for e in self.extras for i in range(self.n)])
+
+    def _extra(self, phi: Array, name: str) -> Array:
+        """φ's entries of the optional group `name`, `(..., n)`."""
+        k = 10 * self.n + self.n * self.extras.index(name)
+        return phi[..., k : k + self.n]
+
+    def friction(self, dq: Array, phi: Array) -> Array:
+        """F(q̇) = f_v ∘ q̇ + f_c ∘ sgn(q̇) (the groups present), shape `(..., n)`."""
+        dq, phi = (x if hasattr(x, "shape") else np.asarray(x, dtype=float) for x in (dq, phi))
+        xp = array_namespace(dq, phi)
+        out = 0.0 * dq + 0.0 * phi[..., :1]
+        if self.viscous is not None:
+            out = out + self._extra(phi, "viscous") * dq
+        if self.coulomb is not None:
+            out = out + self._extra(phi, "coulomb") * xp.sign(dq)
+        return out
 
     def _check_extras(self) -> None:
         """Validate the optional groups given (n values each, none negative) and store them as arrays."""

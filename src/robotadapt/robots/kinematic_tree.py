@@ -530,10 +530,6 @@ class KinematicTree(SerialChain, RobotModel):
         composite = xp.reshape(self._subtree(xp, flat), flat.shape[:-2] + (self.n, 3, 3))
         return self._subtree(xp, mass[..., None]), self._subtree(xp, Rh + mass[..., None] * p0), composite
 
-    def _extra(self, phi: Array, name: str) -> Array:
-        k = 10 * self.n + self.n * self.extras.index(name)
-        return phi[..., k : k + self.n]
-
     def _with_extras(self, xp: Any, Y: Array, batch: tuple[int, ...], values: dict[str, Array]) -> Array:
         """Y with the extra column groups: diag(values[group]) (sgn for Coulomb), zero for a group not in `values`."""
         Y = xp.broadcast_to(Y, batch + (self.n, 10 * self.n))
@@ -613,16 +609,6 @@ class KinematicTree(SerialChain, RobotModel):
         minus_g = self._const["minus_g"]
         G = (kin.u * _cross(xp, h, minus_g + 0.0 * h)).sum(axis=-1) + (kin.x * minus_g).sum(axis=-1) * mass[..., 0]
         return xp.broadcast_to(G, batch + (self.n,))
-
-    def friction(self, dq: Array, phi: Array) -> Array:
-        """F(q̇) = f_v ∘ q̇ + f_c ∘ sgn(q̇) (the groups present), shape `(..., n)`."""
-        xp, batch, (dq, phi) = self._inputs(dq, phi)
-        out = 0.0 * dq + 0.0 * phi[..., :1]
-        if self.viscous is not None:
-            out = out + self._extra(phi, "viscous") * dq
-        if self.coulomb is not None:
-            out = out + self._extra(phi, "coulomb") * xp.sign(dq)
-        return out
 
     def inverse_dynamics(self, q: Array, dq: Array, ddq: Array, phi: Array) -> Array:
         """τ = M q̈ + V_m q̇ + G + F (6.2.1): the standard pass on φ, O(n²) with the subtree sums."""

@@ -140,10 +140,6 @@ class SymbolicArm(SerialChain, RobotModel):
     def _inertial(self, phi: Array) -> Array:
         return phi[..., : 10 * self.n]
 
-    def _extra(self, phi: Array, name: str) -> Array:
-        k = 10 * self.n + self.n * self.extras.index(name)
-        return phi[..., k : k + self.n]
-
     def _columns(self, base: Array, diagonals: dict[str, Array]) -> Array:
         """The rigid-body columns followed by one diagonal block per extra group: diag(given vector), sgn of it for the
         Coulomb group, zero where a group plays no part."""
@@ -185,15 +181,6 @@ class SymbolicArm(SerialChain, RobotModel):
 
     def gravity(self, q: Array, phi: Array) -> Array:
         return self._eval("gravity", (self.n,), q, self._inertial(phi))
-
-    def friction(self, dq: Array, phi: Array) -> Array:
-        xp = array_namespace(dq, phi)
-        out = 0.0 * dq + 0.0 * phi[..., :1]
-        if self.viscous is not None:
-            out = out + self._extra(phi, "viscous") * dq
-        if self.coulomb is not None:
-            out = out + self._extra(phi, "coulomb") * xp.sign(dq)
-        return out
 
     # -- Pinocchio ----------------------------------------------------------------------------------------------------
 
