@@ -270,3 +270,23 @@ def test_models_built_per_run_with_tables_stack_into_one_batch():
     for i, s in enumerate(setups):
         single = simulate(s.plant, s.controller, s.trajectory, t_final=0.003, integrator=RK4(1e-3, "numpy"), q0=s.q0)
         np.testing.assert_allclose(batch.run(i).x, single.x, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("name", ["example-6.3.1", "problem-6.4-1", "example-6.6.3", "example-7.2.1", "sigma-modification"])
+def test_outputs_evaluated_by_jax_equal_the_numpy_ones(name, monkeypatch):
+    """Big batches (and n-DOF runs) evaluate the outputs' pure maps by JAX (`compiled_map`); here every batch does,
+    and each run's τ, φ̂, V, r and passivity integral equal the numpy evaluation, run by run, to round-off."""
+    from robotadapt.sim import outputs
+
+    s = load(name, []).setup
+    plants = [Plant(s.plant.model, s.plant.phi * k, s.plant.disturbance) for k in (1.0, 1.2, 0.8)]
+    batch = simulate_batch(plants, s.controller, s.trajectory, t_final=150 * s.integrator.dt, integrator=s.integrator,
+                           q0=s.q0, dq0=s.dq0, log_every=10)
+    numpy_runs = batch.runs()
+    monkeypatch.setattr(outputs, "COMPILED_OUTPUTS", 0)
+    evaluated, real = [], outputs.compiled_map
+    monkeypatch.setattr(outputs, "compiled_map", lambda *args: evaluated.append(real(*args)) or evaluated[-1])
+    jax_runs = batch.runs()
+    assert evaluated  # JAX evaluated the maps (no fallback to numpy)
+    for a, b in zip(jax_runs, numpy_runs, strict=True):
+        assert_same_run(a, b)
