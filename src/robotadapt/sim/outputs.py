@@ -23,6 +23,7 @@ Array = Any
 COMPILED_OUTPUTS = 10**6  # logged states × parameters from which the maps are evaluated by JAX (a sweep's chunk, an
 # n-DOF arm's long run): numpy's per-call cost is then the larger, JAX's tracing the smaller
 
+
 def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status: str, wall: float,
             info: dict[str, Any], logged: dict[str, Array] | None = None) -> SimulationResult:
     """Recompute torque, V(t), r(t) and the passivity integral (6.4.4) from the pure maps at the logged instants.
