@@ -358,8 +358,11 @@ def test_boundary_layer_gives_a_residual_set_and_no_chattering():
 
 def test_wrapper_reports_the_landau_pi_estimate_and_its_passivity_integral():
     """Around a passivity controller with Landau's PI law, φ̂ = φ̂_I + F_p Zᵀr (6.4.20) is what the torque uses: the
-    wrapper's φ̂ and the passivity integral (6.4.4) ∫ −rᵀZ(φ − φ̂) are the base's, computed here by hand; with k_d = 0
-    the wrapped run is the base's run."""
+    wrapper's φ̂ is the base's, computed here by hand, and its passivity integral (6.4.4) ∫ −rᵀZ(φ − φ̂) obeys the law's
+    identity (docs/laws.md#landau-pi): with y = Zᵀr and φ̃_I = φ − φ̂_I, −yᵀφ̃ = d/dt(½φ̃_Iᵀ K_I⁻¹ φ̃_I) + yᵀF_p y, so
+    Π(t₂) − Π(t₁) = [½φ̃_Iᵀ K_I⁻¹ φ̃_I]_{t₁}^{t₂} + ∫_{t₁}^{t₂} yᵀF_p y, the last by Simpson on 1 ms samples past the
+    ~3 ms F_p transient at t = 0 (smooth there). The integral is the loop's at every RK4 step, the same at any logging
+    rate. With k_d = 0 the wrapped run is the base's run."""
     from scipy.integrate import simpson
 
     from robotadapt.controllers.adaptation import LandauPI
@@ -370,13 +373,21 @@ def test_wrapper_reports_the_landau_pi_estimate_and_its_passivity_integral():
     base = PassivityBased(BOOK, pid_servo(2, FULL["Lam"], np.eye(2)), FULL["Kv"], LandauPI(2, K_I, F_P), np.zeros(2))
     wrapped = SignRobust(BOOK, base, kd=0.0)
     assert hasattr(wrapped, "phi_hat_at")
-    plant, traj = Plant(BOOK, [0.8, 2.3]), sinusoid(2)
-    runs = [simulate(plant, c, traj, t_final=2.0, integrator=RK4(1e-3), log_every=10) for c in (base, wrapped)]
+    phi = np.array([0.8, 2.3])
+    plant, traj = Plant(BOOK, phi), sinusoid(2)
+    runs = [simulate(plant, c, traj, t_final=2.0, integrator=RK4(1e-3), log_every=k) for c, k in ((base, 10),
+                                                                                                   (wrapped, 1))]
     res = runs[1]
     Z, r = base.regressor(res.t, res.x, res.q, res.dq, traj(res.t))
-    phi_hat = res.x[:, -2:] + np.einsum("ij,tkj,tk->ti", F_P, Z, r)
+    y = np.einsum("tkj,tk->tj", Z, r)
+    phi_hat = res.x[:, -2:] + y @ F_P.T
     np.testing.assert_allclose(res.phi_hat, phi_hat, rtol=1e-12, atol=1e-12)
-    integrand = -np.einsum("tk,tkj,tj->t", r, Z, np.array([0.8, 2.3]) - phi_hat)
-    assert res.passivity[-1] == pytest.approx(simpson(integrand, x=res.t), rel=1e-9)
+    tilde_I = phi - res.x[:, -2:]
+    V_I = 0.5 * np.einsum("ti,ij,tj->t", tilde_I, np.linalg.inv(K_I), tilde_I)
+    one = np.searchsorted(res.t, 0.1)
+    feedthrough = simpson(np.einsum("ti,ij,tj->t", y[one:], F_P, y[one:]), x=res.t[one:])
+    assert res.passivity[-1] - res.passivity[one] == pytest.approx(V_I[-1] - V_I[one] + feedthrough, abs=2e-9)
+    assert res.passivity[0] == 0.0 and np.all(res.passivity >= V_I - V_I[0] - 1e-12)
     for name in ("phi_hat", "passivity", "tau", "q"):
-        np.testing.assert_allclose(getattr(res, name), getattr(runs[0], name), rtol=1e-13, atol=1e-13, err_msg=name)
+        np.testing.assert_allclose(getattr(res, name)[::10], getattr(runs[0], name), rtol=1e-13, atol=1e-13,
+                                   err_msg=name)

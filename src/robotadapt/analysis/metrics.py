@@ -81,6 +81,33 @@ def base_metrics(res: SimulationResult, model: RobotModel | None) -> dict[str, A
     return out
 
 
+def saturated_fraction(commanded: np.ndarray, applied: np.ndarray) -> float:
+    """The share of the logged control instants (every tick or step at `log_every` = 1) at which the actuator changed
+    the command on any joint (a torque or rate limit clipped it): |τ − u| > 1e-9·(1 + |τ|)."""
+    clipped = np.any(np.abs(commanded - applied) > 1e-9 * (1.0 + np.abs(commanded)), axis=-1)
+    return float(np.mean(clipped)) if clipped.size else 0.0
+
+
+#: the wind-up warning: the torque sat on its limit over this share of the run, and ‖φ̂‖ grew this many times beyond its
+#: start (and beyond ‖φ‖ when known)
+WINDUP_SATURATED, WINDUP_GROWTH = 0.5, 10.0
+
+
+def health_warnings(m: dict[str, Any]) -> list[str]:
+    """What the summary line warns of, from a run's metrics: integrator wind-up (the torque on its limit most of the
+    run while the estimates grew far beyond their start), naming the remedies."""
+    out = []
+    sat, grown = m.get("saturated_fraction"), m.get("max_phi_hat_norm")
+    start = max(float(np.linalg.norm(m.get("initial_phi_hat", [0.0]))), float(np.linalg.norm(m.get("phi_true", [0.0]))),
+                1e-12)
+    if sat is not None and grown is not None and sat > WINDUP_SATURATED and grown > WINDUP_GROWTH * start:
+        out.append(f"wind-up: the torque sat on its limit {100 * sat:.0f} % of the run and ‖φ̂‖ grew to {grown:.4g} "
+                   f"(from {start:.4g}); the update law integrates an error the saturated torque cannot remove — use a "
+                   "law that filters the applied torque (controller kind 'composite'), σ-modification (law kind "
+                   "'sigma') or a projection box (controller.phi_min, phi_max)")
+    return out
+
+
 def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str, Any]:
     """Per-joint tracking metrics, torque and energy, final estimate, parameter error and Lyapunov monitor.
 
@@ -88,7 +115,8 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
     **per joint**: √(mean_k e_i(t_k)²), one entry per joint (rad or m); `rms_error_norm` the one scalar
     √(mean_k ‖e(t_k)‖²) = √(Σ_i rms_error_i²), what `robotadapt compare` tabulates as "RMS ‖e‖"; `ise` ∫‖e‖² dt;
     `final_error_norm` ‖e(t_final)‖; `max_abs_torque` max |τ| per joint; `control_energy` ∫ τᵀτ dt (the objectives of
-    `robotadapt tune` come from :func:`objective_terms`, the same code the tuner differentiates); `final_phi_error`
+    `robotadapt tune` come from :func:`objective_terms`, the same code the tuner differentiates); `saturated_fraction`
+    (:func:`saturated_fraction`, with an actuator) and `max_phi_hat_norm` max ‖φ̂‖ over the run; `final_phi_error`
     ‖φ − φ̂‖ at the end when the truth is known; `lyapunov_max_rel_increase` the largest step increase of V relative to
     V(0). With the controller's `model`, when its dynamics see fewer combinations than its parameters (an n-DOF arm),
     also the base-parameter keys of :func:`base_metrics`.
@@ -109,11 +137,16 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
         "max_abs_torque": _list(np.max(np.abs(tau), axis=0)),
         "control_energy": terms["energy"],
         "param_names": list(res.param_names),
+        "initial_phi_hat": _list(res.phi_hat[0]),
         "final_phi_hat": _list(res.phi_hat[-1]),
         "wall_time_s": res.wall_time,
     }
     if "tau_commanded" in res.monitors:
-        out["max_abs_commanded_torque"] = _list(np.max(np.abs(res.monitors["tau_commanded"]), axis=0))
+        commanded = res.monitors["tau_commanded"]
+        out["max_abs_commanded_torque"] = _list(np.max(np.abs(commanded), axis=0))
+        out["saturated_fraction"] = saturated_fraction(commanded, tau)
+    norms = np.linalg.norm(res.phi_hat, axis=-1)
+    out["max_phi_hat_norm"] = float(norms.max()) if norms.size else 0.0
     for key in ("plant", "sampling"):  # the real-world effects and the control period the run had
         if key in res.info:
             out[key] = res.info[key]

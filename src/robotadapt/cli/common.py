@@ -40,6 +40,13 @@ MAX_SUMMARY_PARAMETERS = 6
 def summary(name: str, m: dict[str, Any]) -> str:
     """One line: status, final and RMS error, final estimate (its error ‖φ̃‖ for many parameters; for a model with
     unidentifiable directions, the base-parameter error ‖K φ̃‖/‖K φ‖ and how many directions the dynamics cannot see)."""
+    from ..analysis.metrics import health_warnings
+
+    line = _summary(name, m)
+    return "; ".join([line, *(f"warning: {w}" for w in health_warnings(m))])
+
+
+def _summary(name: str, m: dict[str, Any]) -> str:
     head = (f"{name}: {m['status']}; t = {m['t_end']:.4g} s, final |e| = {fmt(m['final_abs_error'])}, "
             f"RMS e = {fmt(m['rms_error'])}")
     names = m["param_names"]

@@ -31,7 +31,13 @@ class UpdateLaw(Protocol):
 
     @property
     def state_size(self) -> int:
-        """Length of the law's state x_a (p for the gradient law, 2p for Landau's PI law)."""
+        """Length of the law's state x_a (p: φ̂ for the gradient and σ laws, φ̂_I for Landau's PI law)."""
+
+    def state_names(self, param_names: tuple[str, ...]) -> tuple[str, ...]:
+        """Names of the entries of x_a, from the model's parameter names: what the state holds (φ̂ or φ̂_I)."""
+
+    def passivity_caveat(self) -> str | None:
+        """Why the passivity claim (6.4.4) is not implied for this law and its gains, or None where it is."""
 
     def initial_state(self, phi_hat0: Array) -> Array:
         """x_a(0) for the initial estimate φ̂(0)."""
@@ -58,6 +64,14 @@ class EstimateLaw:
 
     def initial_state(self, phi_hat0: Array) -> Array:
         return np.array(phi_hat0, dtype=float)
+
+    def state_names(self, param_names: tuple[str, ...]) -> tuple[str, ...]:
+        """`m1_hat`, …: the state is φ̂ itself (gradient and σ laws)."""
+        return tuple(f"{name}_hat" for name in param_names)
+
+    def passivity_caveat(self) -> str | None:
+        """Why the passivity claim (6.4.4) is not implied for this law and its gains, or None where it is."""
+        return None
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,6 +120,10 @@ class LandauPI(EstimateLaw):
     def _K_I_inv(self) -> Array:
         return inverse(self.K_I)
 
+    def state_names(self, param_names: tuple[str, ...]) -> tuple[str, ...]:
+        """`m1_hat_I`, …: the state is the integral part φ̂_I of (6.4.20)–(6.4.21), not the φ̂ the torque uses."""
+        return tuple(f"{name}_hat_I" for name in param_names)
+
     def estimate(self, xa: Array, y: Array) -> Array:
         return xa + y @ self.F_p.T
 
@@ -143,6 +161,15 @@ class SwitchingSigma(Gradient):
         xp = array_namespace(xa)
         norm = xp.sqrt((xa * xa).sum(axis=-1))
         return self.sigma0 * xp.clip(norm / self.phi0 - 1.0, 0.0, 1.0)
+
+    def passivity_caveat(self) -> str | None:
+        """With S = I, dV_φ/dt = −rᵀZφ̃ + σ_s φ̃ᵀΓ⁻¹φ̂, and φ̃ᵀΓ⁻¹φ̂ ≤ 0 whenever ‖φ̂‖ > ‖φ‖ only for Γ = γI
+        (Cauchy–Schwarz); for another Γ the leak can add to V_φ (Γ = diag(100, 1), φ̂ = (3, 1): +0.327)."""
+        G = np.asarray(self.Gamma)
+        if self.scaled or np.allclose(G, G[0, 0] * np.eye(G.shape[0]), rtol=1e-12, atol=0.0):
+            return None
+        return ("the leak σ_s φ̂ with S = I and a Γ that is not γI can increase V_φ = ½φ̃ᵀΓ⁻¹φ̃, so (6.4.4) is not "
+                "implied; use scaled = true (S = Γ) or a scalar Γ")
 
     def derivative(self, xa: Array, y: Array) -> Array:
         leak = xa @ self.Gamma.T if self.scaled else xa

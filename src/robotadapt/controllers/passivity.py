@@ -152,8 +152,7 @@ class PassivityBased:
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        return (tuple(f"xi_{i + 1}" for i in range(self.servo.m))
-                + tuple(f"{name}_hat" for name in self.model.param_names))
+        return tuple(f"xi_{i + 1}" for i in range(self.servo.m)) + self.law.state_names(self.model.param_names)
 
     def initial_state(self, q0: Array, dq0: Array) -> Array:
         """ξ(0) = 0 (for the PID servo ∫₀⁰ e = 0), then the law's state from φ̂(0)."""
@@ -181,6 +180,10 @@ class PassivityBased:
         """(Z, r) of (6.4.3) and (6.4.1), so that M ṙ + V_m r = Z φ − τ."""
         Z, r, _ = self._signals(x, q, dq, ref)
         return Z, r
+
+    def passivity_caveat(self) -> str | None:
+        """The law's reason the passivity claim (6.4.4) is not implied for its gains, or None."""
+        return self.law.passivity_caveat()
 
     def phi_hat(self, x: Array) -> Array:
         """The estimate at zero passivity output y = Zᵀ r: φ̂ (gradient, σ), the integral part φ̂_I (Landau PI)."""

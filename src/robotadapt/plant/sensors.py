@@ -68,6 +68,12 @@ class Sensor:
         dq0 = np.asarray(dq0, dtype=float)
         return self.quantize(np.asarray(q0, dtype=float)) - Ts * dq0, dq0, np.zeros(self.n), np.asarray(True)
 
+    def first_measurement(self, q0: Array, dq0: Array, Ts: float) -> tuple[Array, Array]:
+        """(q_m, q̇_m) at tick 0 from the initial state: the run's first draws, as the run itself makes them (the draws
+        of a block are those of the ticks one after another)."""
+        (q_m, dq_m, _), _ = self.measure(self.start(q0, dq0, Ts), q0, dq0, self.noise(self.generator(), 1)[0], Ts)
+        return q_m, dq_m
+
     def generator(self) -> np.random.Generator:
         """The run's random generator, from `seed`."""
         return np.random.default_rng(self.seed)

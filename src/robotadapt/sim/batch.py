@@ -149,8 +149,8 @@ class BatchResult:
         i = range(len(self))[i]
         k, plant = int(self.n_logged[i]), self.plants[i]
         with np.errstate(all="ignore"):
-            return outputs(ClosedLoop(plant, self.controllers[i], plant.model.n), self.trajectories[i], self.t[:k],
-                           self.z[:k, i], self.status[i], self.wall_time / len(self), self._info(i))
+            return outputs(ClosedLoop(plant, self.controllers[i], plant.model.n, monitored=True), self.trajectories[i],
+                           self.t[:k], self.z[:k, i], self.status[i], self.wall_time / len(self), self._info(i))
 
     def runs(self) -> list[SimulationResult]:
         """Every run's record, equal to `[self.run(i) for i in range(N)]`; their outputs computed together, by the
@@ -159,7 +159,8 @@ class BatchResult:
         N = len(self)
         if (self.n_logged < len(self.t)).any() or any(p.varies for p in self.plants) or N < 2:
             return [self.run(i) for i in range(N)]
-        loop = ClosedLoop(stack(self.plants, "plant"), stack(self.controllers, "controller"), self.plants[0].model.n)
+        loop = ClosedLoop(stack(self.plants, "plant"), stack(self.controllers, "controller"), self.plants[0].model.n,
+                          monitored=True)
         with np.errstate(all="ignore"):
             return batch_outputs(loop, self.controllers, stack(self.trajectories, "trajectory"), self.t, self.z,
                                  self.status, self.wall_time / N, [self._info(i) for i in range(N)])
@@ -269,17 +270,17 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
         raise ConfigError("simulation.log_every", f"{N} runs of {n_steps} steps would keep a {log_bytes / 1e9:.3g} GB "
                           "log; log every more steps")
     controllers = _prepared(runs.controllers, runs.trajectories, dt, t_final)
-    loop = ClosedLoop(stack(runs.plants, "plant"), stack(controllers, "controller"), n)
+    loop = ClosedLoop(stack(runs.plants, "plant"), stack(controllers, "controller"), n, monitored=True)
     line = None  # the delay line, slots (N_slots, N, n): one per run
     if isinstance(loop.controller, HasDelayLine):
         line = Ring.start(np.stack([c.delay_line(dt, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)],
                                    axis=1))
 
     def single(i: int) -> ClosedLoop:
-        return ClosedLoop(runs.plants[i], controllers[i], n)
+        return ClosedLoop(runs.plants[i], controllers[i], n, monitored=True)
 
     wall = time.perf_counter()
-    traj, z0 = stack(runs.trajectories, "trajectory"), np.concatenate([runs.s0, runs.x0], axis=-1)
+    traj, z0 = stack(runs.trajectories, "trajectory"), loop.start(runs.s0, runs.x0)
     traceable = all(p.model.traceable for p in runs.plants) and all(c.model.traceable for c in controllers)
     compiled = choose_backend(integrator.backend, n_steps * len(controllers), traceable) == "jax"
     if compiled:
@@ -311,11 +312,12 @@ def _row(ref: Reference, i: int) -> Reference:
     return Reference(*(a[i if a.shape[0] > 1 else 0] for a in ref))
 
 
-def _advance(z: Array, z_new: Array, alive: Array, max_state: float) -> tuple[Array, Array]:
-    """Accept the step for live runs whose new state is finite and within `max_state`; the others keep their state.
-    Returns (next state, runs that stopped now). Pure: no writes into its inputs."""
+def _advance(loop: ClosedLoop, z: Array, z_new: Array, alive: Array, max_state: float) -> tuple[Array, Array]:
+    """Accept the step for live runs whose new state is finite and within `max_state` (the guarded part of z); the
+    others keep their state. Returns (next state, runs that stopped now). Pure: no writes into its inputs."""
     xp = array_namespace(z, z_new)
-    ok = xp.all(xp.isfinite(z_new), axis=-1) & (xp.max(xp.abs(z_new), axis=-1) <= max_state)
+    guarded = loop.guarded_part(z_new)
+    ok = xp.all(xp.isfinite(z_new), axis=-1) & (xp.max(xp.abs(guarded), axis=-1) <= max_state)
     return xp.where((alive & ok)[:, None], z_new, z), alive & ~ok
 
 
@@ -403,9 +405,9 @@ def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any,
                 stop({i: f"diverged {within(t, dt)}: {why}" for i, why in raised.items()})
             if s is None:
                 break
-            z, now = _advance(z, s.z, alive, max_state)
+            z, now = _advance(loop, z, s.z, alive, max_state)
             if now.any():
-                stop({int(i): f"diverged at t={t + dt:.6g} s: {diverged(s.z[i], max_state)}"
+                stop({int(i): f"diverged at t={t + dt:.6g} s: {diverged(loop.guarded_part(s.z[i]), max_state)}"
                       for i in np.flatnonzero(now)})
             line = s.line
             if not alive.any():

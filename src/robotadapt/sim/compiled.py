@@ -273,8 +273,9 @@ def _program(loop: ClosedLoop, dt: float, max_state: float) -> tuple[Callable[..
         t = c.k * dt
         s = lean(partial(stepper, traced))(c.k, t, c.z, c.line, r0, rh, r1)
         guard = c.alive if s.ok is None else c.alive & s.ok
-        finite = jnp.all(jnp.isfinite(s.z), axis=-1)
-        keep = guard & finite & (jnp.max(jnp.abs(s.z), axis=-1) <= max_state)
+        guarded = traced.guarded_part(s.z)
+        finite = jnp.all(jnp.isfinite(guarded), axis=-1)
+        keep = guard & finite & (jnp.max(jnp.abs(guarded), axis=-1) <= max_state)
         stopped, diverged = c.alive & ~guard, guard & ~keep
         why = jnp.where(stopped, GUARD, jnp.where(diverged, jnp.where(finite, 2, 1), c.why))
         z_bad = None if s.z_bad is None else jnp.where(stopped[..., None], s.z_bad, c.z_bad)

@@ -78,6 +78,7 @@ def _program(loop: ClosedLoop, traj: Trajectory, opts: SolveIVP) -> tuple[Callab
     def margin(t: Array, y: Array, args: Array, **kwargs: Any) -> Array:
         """max_state (`args`) − max|y|, y the state z: the run stops where it crosses zero (located by Newton's method
         on the step's interpolant, as scipy's event is by its root finder)."""
+        y = template[0].guarded_part(y)
         return jnp.where(jnp.all(jnp.isfinite(y)), args - jnp.max(jnp.abs(y)), -1.0)
 
     @jax.jit
@@ -115,7 +116,8 @@ def integrate_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP,
         raise ConfigError("simulation.backend", f"{name} cannot be compiled with JAX ({type(exc).__name__}: "
                           f"{(str(exc).splitlines() or [''])[0][:120]}); use backend = 'numpy'") from None
     z = np.asarray(ys)
-    done = (t_eval <= float(t_end)) & np.all(np.isfinite(z), axis=1) & (np.max(np.abs(z), axis=1) <= max_state)
+    guarded = loop.guarded_part(z)
+    done = (t_eval <= float(t_end)) & np.all(np.isfinite(z), axis=1) & (np.max(np.abs(guarded), axis=1) <= max_state)
     keep = int(np.cumprod(done).sum())
     t, z = t_eval[:keep], z[:keep]
     if bool(stopped):

@@ -16,9 +16,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .._array import array_namespace
-from ..controllers.base import FiltersTorque, HasGuard, HasProjection, NeedsAcceleration
-from ..plant.plant import Plant
+from .._array import array_namespace, matvec
+from ..controllers.base import FiltersTorque, HasGuard, HasInstantEstimate, HasProjection, HasRegressor, NeedsAcceleration
+from ..plant.plant import Plant, same_model
 from ..trajectories import Reference
 
 Array = Any
@@ -30,16 +30,26 @@ MAX_LOG_BYTES = 4e9
 class ClosedLoop:
     """The closed-loop vector field dz/dt = f(t, z), z = [s, x]; the plant receives the saturated torque. Controllers
     that need q̈ get the plant's acceleration for the torque they just applied (no algebraic loop: their torque does not
-    depend on q̈). A law that filters the torque (FiltersTorque) is given the torque the plant receives."""
+    depend on q̈). A law that filters the torque (FiltersTorque) is given the torque the plant receives.
+
+    `monitored`: the state also carries, after x, the monitors' integrals w, integrated with the loop at every step
+    (never from the logged samples): the passivity integral ∫₀ᵗ −rᵀ Z (φ(t) − φ̂) of (6.4.4) for a law with a
+    passivity output (HasRegressor) whose model is the plant's, so its truth φ(t) is known, and its running minimum
+    over the steps (:meth:`after_step`). z = [s, x, w]; the divergence guard reads [s, x] only, without the trailing
+    `records` of x a law may keep for its monitor alone (the repetitive law's window integrals of V, (7.2.43))
+    (:meth:`guarded_part`)."""
 
     plant: Plant
     controller: Any  # a Controller, or a NeedsAcceleration law (torque, then update with the plant's q̈)
     n: int
+    monitored: bool = False
     needs_acceleration: bool = field(init=False)
     m: int = field(init=False)  # the plant's state size, 2n + its extra states
     rigid: bool = field(init=False)  # no extra plant states: the fast path
     filters_torque: bool = field(init=False)  # the law filters the applied torque, and an actuator may change it
     guarded: bool = field(init=False)  # the law has a guard (HasGuard), which traced evaluations read
+    w: int = field(init=False)  # how many monitor values trail the state (0, or 2: the passivity integral, its min)
+    unguarded: int = field(init=False)  # trailing entries the guard skips: w and the law's own records (`records`)
 
     def __post_init__(self) -> None:  # a protocol check costs microseconds: once, not per evaluation
         object.__setattr__(self, "needs_acceleration", isinstance(self.controller, NeedsAcceleration))
@@ -48,10 +58,34 @@ class ClosedLoop:
                            and self.plant.actuator is not None)
         object.__setattr__(self, "m", 2 * self.n + self.plant.n_extra)
         object.__setattr__(self, "rigid", self.plant.n_extra == 0)
+        passive = self.monitored and isinstance(self.controller, HasRegressor)  # a passivity output
+        object.__setattr__(self, "w", 2 * int(passive and same_model(self.plant.model, self.controller.model)))
+        object.__setattr__(self, "unguarded", self.w + getattr(self.controller, "records", 0))
 
     def split(self, z: Array) -> tuple[Array, Array, Array]:
         n = self.n
-        return z[..., :n], z[..., n : 2 * n], z[..., self.m :]
+        return z[..., :n], z[..., n : 2 * n], z[..., self.m : z.shape[-1] - self.w]
+
+    def start(self, s0: Array, x0: Array) -> Array:
+        """z0 = [s0, x0, w0 = 0] (leading run axes allowed)."""
+        return np.concatenate([s0, x0, np.zeros(np.shape(x0)[:-1] + (self.w,))], axis=-1)
+
+    def guarded_part(self, z: Array) -> Array:
+        """[s, x] without the records: what the divergence guard reads (the monitors' integrals are records of the run,
+        not the loop's state)."""
+        return z[..., : z.shape[-1] - self.unguarded] if self.unguarded else z
+
+    def passivity(self, z: Array) -> tuple[Array, Array] | None:
+        """(the passivity integral (6.4.4), its minimum over every step so far) carried in z; None where the loop
+        carries none."""
+        return (z[..., -2], z[..., -1]) if self.w else None
+
+    def dissipation(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        """The passivity integrand −rᵀ Z (φ(t) − φ̂) at (q, q̇) as the law sees them, φ̂ as its torque uses it."""
+        ctrl = self.controller
+        Z, r = ctrl.regressor(t, x, q, dq, ref)
+        phi_hat = ctrl.phi_hat_at(t, x, q, dq, ref) if isinstance(ctrl, HasInstantEstimate) else ctrl.phi_hat(x)
+        return -(r * matvec(Z, self.plant.phi_at(t) - phi_hat)).sum(axis=-1)
 
     def torque(self, t: Array, z: Array, ref: Reference) -> Array:
         """The controller's commanded torque (before the actuator's saturation)."""
@@ -83,7 +117,11 @@ class ClosedLoop:
             if self.filters_torque:
                 dx = self.controller.applied(dx, tau, u)
             head, ddq = self._plant(t, z, q, dq, u)
-        return xp.concatenate([head, ddq, dx] if self.rigid else [head, dx], axis=-1), ok
+        parts = [head, ddq, dx] if self.rigid else [head, dx]
+        if self.w:  # the running minimum is constant within a step and updated after it (after_step)
+            d = self.dissipation(t, x, q, dq, ref)[..., None]
+            parts += [d, 0.0 * d]
+        return xp.concatenate(parts, axis=-1), ok
 
     def __call__(self, t: Array, z: Array, ref: Reference) -> Array:
         return self.rate(t, z, ref)[0]
@@ -93,10 +131,20 @@ class ClosedLoop:
         q, _, x = self.split(np.asarray(z))
         return str(self.controller.stop_reason(q, x))
 
-    def project(self, z: Array) -> Array:
-        if not isinstance(self.controller, HasProjection):
+    def after_step(self, z: Array) -> Array:
+        """The state after a fixed step: x projected (HasProjection), the passivity integral's running minimum
+        updated."""
+        if isinstance(self.controller, HasProjection):
+            z = self.with_x(z, self.controller.project(self.split(z)[2]))
+        if not self.w:
             return z
-        return array_namespace(z).concatenate([z[..., : self.m], self.controller.project(z[..., self.m :])], axis=-1)
+        xp = array_namespace(z)
+        return xp.concatenate([z[..., :-1], xp.minimum(z[..., -1:], z[..., -2:-1])], axis=-1)
+
+    def with_x(self, z: Array, x: Array) -> Array:
+        """z with the controller's part replaced by `x` (the monitors' integrals kept)."""
+        tail = [z[..., z.shape[-1] - self.w :]] if self.w else []
+        return array_namespace(z, x).concatenate([z[..., : self.m], x, *tail], axis=-1)
 
 
 REASONS = {1: "non-finite state", 2: "state exceeded {max_state:g} in magnitude"}  # why the divergence guard stopped
@@ -123,7 +171,7 @@ def stop_status(loop: ClosedLoop, t: float, why: int, max_state: float, z_bad: A
 
 
 def diverged(z: Array, max_state: float) -> str | None:
-    if not np.all(np.isfinite(z)):
+    if not np.all(np.isfinite(z)):  # z: the guarded part [s, x] (ClosedLoop.guarded_part)
         return REASONS[1]
     if np.max(np.abs(z)) > max_state:
         return REASONS[2].format(max_state=max_state)
@@ -183,8 +231,7 @@ def sample(loop: ClosedLoop, k: Any, t: Any, z: Array, line: Ring, ref: Referenc
     x_new, store = loop.controller.sample(t, x, q, dq, ref, line.head)
     n = line.slots.shape[0]
     slots = ring_write(line.slots, k % n, store)
-    return array_namespace(z, x_new).concatenate([z[..., : loop.m], x_new], axis=-1), Ring(slots,
-                                                                                          ring_read(slots, (k + 1) % n))
+    return loop.with_x(z, x_new), Ring(slots, ring_read(slots, (k + 1) % n))
 
 
 def rk4_step(loop: ClosedLoop, t: Any, z: Array, dt: float, r0: Reference, rh: Reference,
@@ -199,7 +246,7 @@ def rk4_step(loop: ClosedLoop, t: Any, z: Array, dt: float, r0: Reference, rh: R
     k3, ok3 = loop.rate(t + 0.5 * dt, z3, rh)
     z4 = z + dt * k3
     k4, ok4 = loop.rate(t + dt, z4, r1)
-    z_new = loop.project(z + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
+    z_new = loop.after_step(z + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
     if ok1 is None or ok2 is None or ok3 is None or ok4 is None:
         return z_new, None, None
     xp = array_namespace(z)

@@ -1,6 +1,8 @@
 """What a run's record holds besides its states, recomputed after integration from the pure maps of the controller and
-the plant, vectorized over the logged instants: torque, V(t), r(t), the passivity integral (6.4.4), φ̂ as the torque
-uses it, and the controller's monitor signals (V_φ(t), λ_min(P⁻¹(t)); the laws' proofs, docs/laws.md).
+the plant, vectorized over the logged instants: torque, V(t), r(t), φ̂ as the torque uses it, and the controller's
+monitor signals (V_φ(t), λ_min(P⁻¹(t)); the laws' proofs, docs/laws.md). The passivity integral (6.4.4) is not
+recomputed here: it is integrated with the loop at every step (ClosedLoop.monitored), so no monitor depends on how
+often the run was logged.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from .._array import matvec
-from ..controllers.base import HasFilteredError, HasInstantEstimate, HasLyapunov, HasRegressor
+from ..controllers.base import HasFilteredError, HasInstantEstimate, HasLyapunov
 from ..trajectories import Reference, Trajectory
 from ..validation import ConfigError
 from .compiled import compiled_map
@@ -67,7 +69,7 @@ def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z
     ctrl, plant = loop.controller, loop.plant
     if is_dataclass(ctrl):  # the library's laws (a user's object may not copy: it is left as it is)
         ctrl = copy.copy(ctrl)
-        loop = ClosedLoop(plant, ctrl, loop.n)
+        loop = ClosedLoop(plant, ctrl, loop.n, loop.monitored)
     q, dq, x = loop.split(z)
     ref = Reference(*(a if a.shape == q.shape else np.broadcast_to(a, q.shape) for a in trajectory(times)))
     extras = dict(logged or {})
@@ -76,11 +78,11 @@ def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z
     traceable = plant.model.traceable and ctrl.model.traceable
     if traceable and z.size // z.shape[-1] * max(ctrl.model.p, plant.model.p) >= COMPILED_OUTPUTS:
         try:
-            maps = compiled_map(_maps, loop, (logged is None, t.size > 1), *args)
+            maps = compiled_map(_maps, loop, (logged is None,), *args)
         except ConfigError:  # a law with host-side code: numpy
-            maps = _maps(loop, (logged is None, t.size > 1), *args)
+            maps = _maps(loop, (logged is None,), *args)
     else:
-        maps = _maps(loop, (logged is None, t.size > 1), *args)
+        maps = _maps(loop, (logged is None,), *args)
     if logged is None:
         tau = maps["tau"]
         if plant.actuator is not None:
@@ -90,24 +92,22 @@ def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z
     if truth is not None and maps["phi_hat"].shape[-1] != plant.model.p:
         truth = None  # the law estimates no parameters of the plant's: the record has no true φ
     passivity = None
-    if maps["dissipation"] is not None:
-        from scipy.integrate import cumulative_simpson  # here: importing the simulator stays light
-
-        passivity = cumulative_simpson(maps["dissipation"], x=t, axis=0, initial=0.0)
+    carried = loop.passivity(z)  # integrated with the loop (ClosedLoop.monitored), not from the logged samples
+    if carried is not None:
+        passivity, extras["passivity_running_min"] = carried
     extras.update(plant.extra_series(z[..., : loop.m]))
     return {"q": q, "dq": dq, "x": x, "q_des": ref.q_des, "dq_des": ref.dq_des, "ddq_des": ref.ddq_des, "tau": tau,
             "V": maps["V"], "r": maps["r"], "phi_hat": maps["phi_hat"], "passivity": passivity, "truth": truth}, extras
 
 
-def _maps(loop: ClosedLoop, flags: tuple[bool, bool], times: Array, z: Array, ref: Reference, q_measured: Array | None,
+def _maps(loop: ClosedLoop, flags: tuple[bool], times: Array, z: Array, ref: Reference, q_measured: Array | None,
           dq_measured: Array | None, truth: Array | None) -> dict[str, Array | None]:
     """The pure maps of the controller and the plant at the logged states, array-API code (numpy, or JAX through
     :func:`~robotadapt.sim.compiled.compiled_map`): the commanded and applied torque (continuous time, `flags[0]`), φ̂
-    as the torque uses it, V, r, and the integrand −rᵀ Z (φ − φ̂) of the passivity integral (6.4.4) (with more than
-    one sample, `flags[1]`)."""
+    as the torque uses it, V and r."""
     ctrl, plant = loop.controller, loop.plant
     q, dq, x = loop.split(z)
-    out: dict[str, Array | None] = {"commanded": None, "tau": None, "V": None, "r": None, "dissipation": None}
+    out: dict[str, Array | None] = {"commanded": None, "tau": None, "V": None, "r": None}
     if flags[0]:
         out["commanded"] = loop.torque(times, z, ref)
         out["tau"] = plant.saturate(out["commanded"])
@@ -120,9 +120,6 @@ def _maps(loop: ClosedLoop, flags: tuple[bool, bool], times: Array, z: Array, re
         out["V"] = ctrl.lyapunov(times, x, q, dq, ref, truth)
     if isinstance(ctrl, HasFilteredError):
         out["r"] = ctrl.filtered_error(times, x, q, dq, ref)
-    if isinstance(ctrl, HasRegressor) and truth is not None and phi_hat.shape[-1] == plant.model.p and flags[1]:
-        Z, r_z = ctrl.regressor(times, x, q, dq, ref)
-        out["dissipation"] = -(r_z * matvec(Z, truth - phi_hat)).sum(axis=-1)
     return out
 
 
@@ -130,13 +127,16 @@ def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | 
             status: str, wall: float, info: dict[str, Any]) -> SimulationResult:
     phi_hat = signals["phi_hat"]
     assert phi_hat is not None
+    caveat = getattr(ctrl, "passivity_caveat", None)  # a law whose passivity claim its gains may not imply
+    if signals["passivity"] is not None and caveat is not None and caveat() is not None:
+        info = {**info, "passivity_caveat": caveat()}
     result = SimulationResult(t=t, **signals, phi=phi,  # type: ignore[arg-type]
                               param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
                               state_names=ctrl.state_names, status=status, wall_time=wall, info=info)
-    return replace(result, monitors={**controller_series(result, ctrl), **extras})
+    return replace(result, monitors={**controller_series(result, ctrl, extras.get("phi_true")), **extras})
 
 
-def controller_series(res: SimulationResult, controller: Any) -> dict[str, Array]:
+def controller_series(res: SimulationResult, controller: Any, phi_t: Array | None = None) -> dict[str, Array]:
     """Signals of the run that need its controller, at the logged instants:
 
     - `parameter_lyapunov`: V_φ(t) = V(t) − ½ rᵀ M(q) r, the parameter part of V (½ φ̃ᵀ Γ⁻¹ φ̃ in (6.3.7) and (6.4.8),
@@ -144,11 +144,26 @@ def controller_series(res: SimulationResult, controller: Any) -> dict[str, Array
       passivity bound β of (6.4.4): d V_φ/dt = −rᵀ Z φ̃ − (non-negative terms), so ∫₀ᵗ −rᵀ Z φ̃ ≥ −V_φ(0).
     - `lambda_min_P_inv`: λ_min(P⁻¹(t)) of the least-squares gain (composite law, (6.6.27)); it grows without bound
       exactly when the infinite-integral condition (6.6.18) holds.
+
+    `phi_t`: the true φ(t) at the logged instants when it changed during the run (a payload attached); M(q, φ(t)) is
+    then taken at each instant, as V was, so that V_φ and β = V_φ(0) are those of the arm as it was then. The bound
+    (6.4.4) is for a constant φ: where φ jumps, V_φ jumps with it (φ̂ does not), and ∫₀ᵗ −rᵀZφ̃ ≥ −V_φ(0) − Σ ΔV_φ.
+    `parameter_lyapunov_jump` holds ΔV_φ = V_φ(φ after) − V_φ(φ before) at the first logged instant after each change
+    (both with that instant's state), 0 elsewhere.
     """
     out: dict[str, Array] = {}
     if res.passivity is not None and res.V is not None and res.r is not None and res.phi is not None:
-        M = controller.model.mass_matrix(res.q, res.phi)
-        out["parameter_lyapunov"] = res.V - 0.5 * (res.r * matvec(M, res.r)).sum(axis=-1)
+        def parameter_part(V: Array, phi: Array) -> Array:
+            return V - 0.5 * (res.r * matvec(controller.model.mass_matrix(res.q, phi), res.r)).sum(axis=-1)
+
+        out["parameter_lyapunov"] = parameter_part(res.V, res.phi if phi_t is None else phi_t)
+        if phi_t is not None:
+            before = np.concatenate([phi_t[:1], phi_t[:-1]])
+            ref = Reference(res.q_des, res.dq_des, res.ddq_des)
+            V_before = controller.lyapunov(res.t, res.x, res.q, res.dq, ref, before)
+            changed = np.any(before != phi_t, axis=-1)
+            out["parameter_lyapunov_jump"] = np.where(changed, out["parameter_lyapunov"]
+                                                      - parameter_part(V_before, before), 0.0)
     if hasattr(controller, "lambda_min_P_inv"):  # least squares, or a wrapper around it
         out["lambda_min_P_inv"] = controller.lambda_min_P_inv(res.x)
     return out

@@ -17,7 +17,8 @@ class SimulationResult:
     estimate it holds, `V` the controller's Lyapunov function (None where the theory defines none), `r` its filtered
     error. `phi` is the true parameter vector when the controller's model matches the plant's, else None.
     `status` is ``"ok"`` or ``"diverged at t=… s: reason"``. `passivity` is the running integral ∫₀ᵗ −rᵀ Z φ̃ dσ of
-    (6.4.4) for controllers with a regressor, when the truth is known (Simpson's rule on the logged samples).
+    (6.4.4) for controllers with a regressor, when the truth is known: carried in the integrated state (RK4 at every
+    step; the sum over the ticks in sampled-data runs), read at the logged instants (docs/monitors.md).
     `monitors` holds signals that need the controller (robotadapt.monitors.controller_series): V_φ(t), λ_min(P⁻¹(t))."""
 
     t: Array

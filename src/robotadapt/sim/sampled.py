@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from .._array import array_namespace
-from ..controllers.base import HasProjection, SimulationStop
+from ..controllers.base import FiltersTorque, HasProjection, SimulationStop
 from ..plant.actuators import Actuator
 from ..plant.mujoco import MujocoPlant
 from ..plant.sensors import Sensor
@@ -63,6 +63,7 @@ class Carry(NamedTuple):
     sensor: tuple[Array, Array, Array, Array]  # the measurement path's memory (Sensor.start)
     actuator: tuple[Array, Array]  # u_{k−1} and the commands in flight (d, n) (Actuator.start)
     line: Array  # the delay line (N, ...) of a law with one; shape (0,) without
+    w: Array  # the monitors (loop.w,): the passivity sum Σ_{j<k} Ts·(−r_jᵀ Z_j φ̃_j) and its running minimum
 
 
 class Inputs(NamedTuple):
@@ -84,12 +85,13 @@ class Sample(NamedTuple):
     u: Array  # applied
     dx: Array
     ok: Array | None  # a guarded law's guard at the sample, traced (None: no guard, or numpy, where the law raises)
+    dw: Array | None  # the monitors' summands at the tick (the passivity integrand, as the law saw the tick), or None
 
 
 class Record(NamedTuple):
     """What a logged tick keeps (the names of the result's signals)."""
 
-    z: Array  # [s_k, x_k]
+    z: Array  # [s_k, x_k, w_k]
     tau: Array  # the applied u_k
     tau_commanded: Array
     q_measured: Array
@@ -152,16 +154,20 @@ class Tick:
     max_state: float
     has_line: bool
     projects: bool = field(init=False)
+    filters: bool = field(init=False)  # the law filters the torque (FiltersTorque): it is given the held u_k
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "projects", isinstance(self.loop.controller, HasProjection))
+        object.__setattr__(self, "filters", isinstance(self.loop.controller, FiltersTorque))
 
     def start(self, z0: Array, line: Array | None) -> Carry:
-        """The carry before tick 0: z0 = [s0, x0] and the delay line's initial contents (None: no line)."""
+        """The carry before tick 0: z0 = [s0, x0, w0] (ClosedLoop.start) and the delay line's initial contents (None: no
+        line)."""
         n, m, Ts = self.loop.n, self.loop.m, self.opts.control_period
-        s, x = np.asarray(z0[:m], dtype=float), np.asarray(z0[m:], dtype=float)
+        s, x = np.asarray(z0[:m], dtype=float), np.asarray(z0[m : len(z0) - self.loop.w], dtype=float)
         buffer = np.zeros(0) if line is None else np.array(line, dtype=float)
-        return Carry(s, x, self.sensor.start(s[:n], s[n : 2 * n], Ts), self.actuator.start(), buffer)
+        return Carry(s, x, self.sensor.start(s[:n], s[n : 2 * n], Ts), self.actuator.start(), buffer,
+                     np.zeros(self.loop.w))
 
     def __call__(self, carry: Carry, inputs: Any) -> tuple[Carry, Record, Verdict]:
         """(carry_{k+1}, record_k, verdict_k): steps 1–7 of the module docstring."""
@@ -191,13 +197,15 @@ class Tick:
         else:
             tau, dx = ctrl(t, x, q_m, dq_m, ref)
             u, actuator = self.actuator.apply(carry.actuator, tau, Ts)
-            if self.loop.filters_torque:
+            if self.filters:
                 dx = ctrl.applied(dx, tau, u)
-        return Carry(s, x, sensor, actuator, line), Sample(q_m, dq_m, ddq_m, tau, u, dx, ok)
+        dw = self.loop.dissipation(t, x, q_m, dq_m, ref)[..., None] if self.loop.w else None
+        return carry._replace(x=x, sensor=sensor, actuator=actuator, line=line), Sample(q_m, dq_m, ddq_m, tau, u, dx,
+                                                                                        ok, dw)
 
     def record(self, carry: Carry, sample: Sample) -> Record:
         """Step 5, from the carry `sample` returned."""
-        z = array_namespace(carry.s, carry.x).concatenate([carry.s, carry.x])
+        z = array_namespace(carry.s, carry.x).concatenate([carry.s, carry.x, carry.w])
         return Record(z, sample.u, sample.tau, sample.q_m, sample.dq_m)
 
     def advance(self, carry: Carry, inputs: Any, sample: Sample) -> tuple[Carry, Array, Array | None]:
@@ -213,7 +221,11 @@ class Tick:
             why = xp.where(ok, why, GUARD)
         elif sample.ok is not None:
             x_bad = carry.x
-        return carry._replace(s=s, x=x), why, x_bad
+        w = carry.w
+        if sample.dw is not None:  # the sum, then its running minimum
+            total = carry.w[:1] + self.opts.control_period * sample.dw
+            w = xp.concatenate([total, xp.minimum(carry.w[1:], total)])
+        return carry._replace(s=s, x=x, w=w), why, x_bad
 
     def guarded(self, s: Array) -> bool:
         """Whether the tick reads the law's guard (HasGuard): on traced arrays; on numpy ones the law raises itself."""
@@ -234,7 +246,7 @@ class Tick:
             if self.loop.needs_acceleration:
                 return ctrl.update(t, y, q, dq, ddq, ref)
             tau, dy = ctrl(t, y, q, dq, ref)
-            return ctrl.applied(dy, tau, sample.u) if self.loop.filters_torque else dy
+            return ctrl.applied(dy, tau, sample.u) if self.filters else dy
 
         xp = array_namespace(x)
         if sample.ok is None:
@@ -270,7 +282,7 @@ class Tick:
     def blank(self, carry: Carry) -> Record:
         """A record of zeros shaped like this tick's (what a compiled block starts from)."""
         n = self.loop.n
-        return Record(np.zeros(carry.s.size + carry.x.size), *(np.zeros(n) for _ in range(4)))
+        return Record(np.zeros(carry.s.size + carry.x.size + carry.w.size), *(np.zeros(n) for _ in range(4)))
 
     def logged(self, records: Record) -> dict[str, Array]:
         """The result's signals from the stacked records: `tau` (applied), and `tau_commanded` with an actuator,
@@ -309,7 +321,8 @@ def _run(tick: Tick, carry: Carry, traj: Trajectory, n_ticks: int, log_every: in
     Ts = tick.opts.control_period
     rng = tick.sensor.generator()
     n_log = n_ticks // log_every + 1
-    logs = Record(*(np.empty((n_log, width)) for width in (carry.s.size + carry.x.size,) + (tick.loop.n,) * 4))
+    logs = Record(*(np.empty((n_log, width)) for width in (carry.s.size + carry.x.size + carry.w.size,)
+                    + (tick.loop.n,) * 4))
     k_log, status, start = 0, "ok", 0
     quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
     with tqdm(total=n_ticks + 1, delay=1.0, disable=quiet, unit="tick", leave=False, file=sys.stderr) as bar, \

@@ -55,7 +55,7 @@ def _rk4(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int,
                     z_log[k_log], k_log = z if s is None else s.applied, k_log + 1
                 if s is None:
                     break
-                reason = diverged(s.z, max_state)
+                reason = diverged(loop.guarded_part(s.z), max_state)
                 if reason is not None:
                     status = f"diverged at t={t + dt:.6g} s: {reason}"
                     break
@@ -87,6 +87,7 @@ def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_
         return loop(t, y, traj(t))
 
     def runaway(t: float, y: Array) -> float:
+        y = loop.guarded_part(y)
         return max_state - float(np.max(np.abs(y))) if np.all(np.isfinite(y)) else -1.0
 
     runaway.terminal = True  # type: ignore[attr-defined]
@@ -132,13 +133,14 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
              info: dict[str, Any] | None = None) -> SimulationResult:
     """Simulate the closed loop from t = 0 to `t_final` (s).
 
-    `q0, dq0` default to zero, `x0` to `controller.initial_state()`. With :class:`RK4`, the state is logged every
-    `log_every` steps; with :class:`SolveIVP` on its own output grid; with :class:`Sampled` every `log_every` control
-    ticks. The run stops early, keeping its partial result, if the state becomes non-finite or exceeds `max_state`.
-    The plant's sensor, rate limit and delay act at control ticks: they need :class:`Sampled`. A MuJoCo plant
-    (:class:`~robotadapt.plant.mujoco.MujocoPlant`) runs in the sampled-data loop (:func:`mujoco_sampling`). The
-    result's `info` records the plant's real-world effects and its model when it is not the controller's (`plant`),
-    and the sampling (`sampling`).
+    `q0, dq0` default to zero, `x0` to `controller.initial_state()` at what the law measures first (the sensor's tick-0
+    measurement of (q0, q̇0) in sampled time, noise included: the composite law's filter starts from it). With
+    :class:`RK4`, the state is logged every `log_every` steps; with :class:`SolveIVP` on its own output grid; with
+    :class:`Sampled` every `log_every` control ticks. The run stops early, keeping its partial result, if the state
+    becomes non-finite or exceeds `max_state`. The plant's sensor, rate limit and delay act at control ticks: they need
+    :class:`Sampled`. A MuJoCo plant (:class:`~robotadapt.plant.mujoco.MujocoPlant`) runs in the sampled-data loop
+    (:func:`mujoco_sampling`). The result's `info` records the plant's real-world effects and its model when it is not
+    the controller's (`plant`), and the sampling (`sampling`).
 
     Examples
     --------
@@ -164,11 +166,15 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     t_final = as_scalar(t_final, "simulation.t_final", positive=True)
     q0 = as_vector(0.0 if q0 is None else q0, n, "plant.q0")
     dq0 = as_vector(0.0 if dq0 is None else dq0, n, "plant.dq0")
-    x0 = controller.initial_state(q0, dq0) if x0 is None else np.asarray(x0, dtype=float)
     if not isinstance(log_every, int) or log_every < 1:
         raise ConfigError("simulation.log_every", f"must be a positive integer, got {log_every!r}")
     plant.check_state(q0)
     sampled = isinstance(integrator, Sampled)
+    if x0 is None:  # from what the law sees first: the sensor's tick-0 measurement in sampled time, else (q0, q̇0)
+        seen = (plant.sensor.first_measurement(q0, dq0, integrator.control_period)
+                if isinstance(integrator, Sampled) and plant.sensor is not None else (q0, dq0))
+        x0 = controller.initial_state(*seen)
+    x0 = np.asarray(x0, dtype=float)
     check_plant_step(plant, integrator)
     h = integrator.control_period if isinstance(integrator, Sampled) else integrator.dt
     if isinstance(controller, Prepares):
@@ -184,8 +190,8 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
         if isinstance(integrator, SolveIVP):
             raise ConfigError("simulation.method", "a controller with a delay line (repetitive) needs method = 'rk4'")
         line = DelayLine(np.array(controller.delay_line(h, q0, dq0), dtype=float))
-    loop = ClosedLoop(plant, controller, n)
-    z0 = np.concatenate([plant.initial_state(q0, dq0), x0])
+    loop = ClosedLoop(plant, controller, n, monitored=True)
+    z0 = loop.start(plant.initial_state(q0, dq0), x0)
     info, effects = dict(info or {}), plant.describe()
     if not same_model(plant.model, controller.model):  # the truth is another model: friction it lacks, a URDF arm
         effects["model"] = {"class": type(plant.model).__name__, "param_names": list(plant.model.param_names),
