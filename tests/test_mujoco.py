@@ -23,7 +23,7 @@ from robotadapt.studies.scenarios import load
 from robotadapt.validation import ConfigError
 
 try:
-    mujoco = load_mujoco()  # first: it picks the off-screen renderer before mujoco is imported
+    mujoco = load_mujoco()  # imports mujoco with no GL backend: only --video picks one (report/video.py)
 except ConfigError:  # pragma: no cover - `make test` installs the extra
     pytest.skip("the mujoco extra is not installed", allow_module_level=True)
 RNG = np.random.default_rng(18)

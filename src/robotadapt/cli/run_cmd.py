@@ -19,7 +19,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--out", type=Path, help="output folder (default: results/NAME)")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     run.add_argument("--video", action="store_true", help="also write motion.mp4: the arm and, as a ghost, the desired "
-                     "pose, rendered off-screen by MuJoCo (extra [mujoco]; OSMesa on a machine without display)")
+                     "pose, rendered off-screen by MuJoCo (extra [mujoco]; OpenGL: OSMesa on a machine without "
+                     "display, or MUJOCO_GL=egl)")
 
 
 def _study(scenario: Any, out: Path, no_plots: bool) -> None:
@@ -49,6 +50,10 @@ def main(args: argparse.Namespace) -> int:
 
     scenario = load(args.scenario, overrides(args))
     out = args.out if args.out is not None else Path("results") / scenario.name
+    if args.video:  # no OpenGL backend: say so before the run, not after it
+        from ..report.video import check_rendering
+
+        check_rendering()
     result = scenario.run(progress=True)
     model = scenario.setup.controller.model
     save_result(result, out, scenario.text, model=model)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -57,14 +58,22 @@ INSTALL = "the MuJoCo plant needs the mujoco package: pip install 'robotadapt[mu
 
 
 def load_mujoco() -> Any:
-    """The `mujoco` module; off-screen rendering on the CPU (OSMesa) where no display and no MUJOCO_GL is set. A
-    missing package is a ConfigError naming `plant.engine`."""
-    if "DISPLAY" not in os.environ:
-        os.environ.setdefault("MUJOCO_GL", "osmesa")
+    """The `mujoco` module, imported without an OpenGL backend: simulating draws nothing, and MuJoCo's import would
+    otherwise load the one MUJOCO_GL names (PyOpenGL and libOSMesa for "osmesa"), failing on a machine without it.
+    The renderer picks a backend when it is needed (:func:`robotadapt.report.video.gl_backend`), honouring a
+    MUJOCO_GL the user set. A missing package is a ConfigError naming `plant.engine`."""
+    first, user = "mujoco" not in sys.modules, os.environ.get("MUJOCO_GL")
+    if first:
+        os.environ["MUJOCO_GL"] = "disable"  # read once, by mujoco.rendering.classic.gl_context at import
     try:
         import mujoco
     except ImportError:
         raise ConfigError("plant.engine", INSTALL) from None
+    finally:
+        if first and user is not None:
+            os.environ["MUJOCO_GL"] = user
+        elif first:
+            os.environ.pop("MUJOCO_GL", None)
     return mujoco
 
 

@@ -1,11 +1,17 @@
-"""A run as a movie: the arm as it moved and, as a translucent ghost, the desired pose, rendered off-screen by MuJoCo on
-the CPU (OSMesa where no display is set: `apt-get install libosmesa6`) and written as MP4 (imageio with its ffmpeg) or,
-without ffmpeg, as a GIF (Pillow).
+"""A run as a movie: the arm as it moved and, as a translucent ghost, the desired pose, rendered off-screen by MuJoCo and
+written as MP4 (imageio with its ffmpeg) or, without ffmpeg, as a GIF (Pillow).
+
+Only rendering needs OpenGL: the plant imports MuJoCo without a GL backend (:func:`~robotadapt.plant.mujoco.load_mujoco`)
+and :func:`gl_backend` picks one right before the first renderer: the user's MUJOCO_GL, else GLFW on a display, else
+OSMesa on the CPU (`apt-get install libosmesa6`). Without a working backend `--video` is a ConfigError (`GL_FIX`).
 """
 
 from __future__ import annotations
 
+import importlib
 import os
+import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +24,59 @@ from ..sim.result import SimulationResult
 from ..validation import ConfigError
 
 GHOST_RGBA = (0.2, 0.8, 0.3, 0.35)  # the desired pose: translucent green
+GL_FIX = "install an OpenGL backend: apt-get install libosmesa6, or set MUJOCO_GL=egl"
+
+
+def _no_gl(backend: str, exc: BaseException) -> ConfigError:
+    """The `--video` error: MuJoCo cannot draw with `backend` (MUJOCO_GL's value) because of `exc`."""
+    if isinstance(exc, AttributeError):  # PyOpenGL without its library: "'NoneType' object has no attribute ..."
+        reason = "its OpenGL library does not load"
+    else:
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    return ConfigError("--video", f"MuJoCo cannot render off-screen with MUJOCO_GL={backend or 'glfw'} ({reason}); "
+                       f"{GL_FIX}")
+
+
+def gl_backend(mj: Any) -> str:
+    """Give MuJoCo's renderer an OpenGL backend, once: the user's MUJOCO_GL, else "glfw" where DISPLAY is set, else
+    "osmesa"; returns it. MuJoCo chooses the backend when its `gl_context` module runs, which the plant's import of
+    MuJoCo made choose none: it is run again here with MUJOCO_GL set for it (the user's environment is left as it was).
+    A backend that does not load is a ConfigError naming `--video` and the fix."""
+    backend = os.environ.get("MUJOCO_GL", "" if os.environ.get("DISPLAY") else "osmesa")
+    if getattr(mj, "Renderer", None) is None:  # MuJoCo's rendering module did not import
+        raise _no_gl(backend, ImportError("mujoco.Renderer is missing"))
+    context = sys.modules[mj.Renderer.__module__].gl_context  # the module whose GLContext the Renderer creates
+    if getattr(context, "GLContext", None) is not None:
+        return backend
+    user = os.environ.get("MUJOCO_GL")
+    os.environ["MUJOCO_GL"] = backend
+    try:
+        importlib.reload(context)
+    except (ImportError, AttributeError, OSError, RuntimeError) as exc:  # PyOpenGL without libOSMesa: AttributeError
+        raise _no_gl(backend, exc) from None
+    finally:
+        if user is None:
+            os.environ.pop("MUJOCO_GL", None)
+    if getattr(context, "GLContext", None) is None:  # MUJOCO_GL=disable
+        raise _no_gl(backend, RuntimeError("no GL context"))
+    return backend
+
+
+def renderer(mj: Any, model: Any, height: int, width: int) -> Any:
+    """A `mujoco.Renderer` of `model` (:func:`gl_backend` first); no working OpenGL is a ConfigError naming `--video`."""
+    backend = gl_backend(mj)
+    try:
+        with warnings.catch_warnings():  # GLFW without a display warns before it fails: the error says it all
+            warnings.simplefilter("ignore")
+            return mj.Renderer(model, height, width)
+    except Exception as exc:  # no context: mujoco.FatalError, RuntimeError, GLFW's or PyOpenGL's errors
+        raise _no_gl(backend, exc) from None
+
+
+def check_rendering() -> None:
+    """Fail now, before a run, where `--video` could not draw: a renderer of an empty model, opened and closed."""
+    mj = load_mujoco()
+    renderer(mj, mj.MjModel.from_xml_string("<mujoco/>"), 16, 16).close()
 
 
 def _camera(mj: Any, model: Any, data: Any, plant: MujocoPlant) -> Any:
@@ -43,26 +102,22 @@ def frames(result: SimulationResult, plant: MujocoPlant, times: Any, size: tuple
     model = plant.engine[0]
     width, height = size
     model.vis.global_.offwidth, model.vis.global_.offheight = max(width, 640), max(height, 480)
-    try:
-        renderer = mj.Renderer(model, height, width)
-    except Exception as exc:  # no OpenGL: MuJoCo raises its own errors here (mujoco.FatalError, RuntimeError)
-        raise ConfigError("--video", f"MuJoCo cannot render off-screen here ({exc}); install OSMesa "
-                          "(apt-get install libosmesa6) or set MUJOCO_GL") from None
+    drawing = renderer(mj, model, height, width)
     actual, ghost = mj.MjData(model), mj.MjData(model)
     camera, option, perturb = _camera(mj, model, actual, plant), mj.MjvOption(), mj.MjvPerturb()
     n, out = result.q.shape[1], []
-    with renderer:
+    with drawing:
         for t in np.atleast_1d(times):
             for data, series in ((actual, result.q), (ghost, result.q_des)):
                 data.qpos[:] = plant.qpos(np.array([np.interp(t, result.t, series[:, i]) for i in range(n)]))
                 mj.mj_kinematics(model, data)
-            renderer.update_scene(actual, camera)
-            scene = renderer.scene
+            drawing.update_scene(actual, camera)
+            scene = drawing.scene
             first = scene.ngeom
             mj.mjv_addGeoms(model, ghost, option, perturb, mj.mjtCatBit.mjCAT_DYNAMIC, scene)
             for geom in range(first, scene.ngeom):
                 scene.geoms[geom].rgba[:] = GHOST_RGBA
-            out.append(renderer.render().copy())
+            out.append(drawing.render().copy())
     return out
 
 
