@@ -75,7 +75,7 @@ def test_a_batch_equals_the_numpy_batch_run_by_run():
 def test_loops_of_one_shape_share_a_program_and_keep_their_own_gains():
     """The second controller reuses the first one's compiled program (its gains are arguments, not constants) and
     still gets its own answer."""
-    from robotadapt import compiled
+    from robotadapt.sim import compiled
 
     runs = []
     for kv in (5.0, 20.0):

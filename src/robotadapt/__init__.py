@@ -1,8 +1,52 @@
-"""robotadapt: adaptive control of rigid robot manipulators (layers: docs/architecture.md)."""
+"""robotadapt: adaptive control of rigid robot manipulators (layers: docs/architecture.md).
 
+The front door, `import robotadapt as ra`: the names a user needs, each imported from its module when first used, so
+that importing the package stays light (no JAX, scipy or matplotlib until a name needs them) and changes nothing
+outside it (no import hooks, no JAX settings).
+
+>>> import robotadapt as ra
+>>> arm = ra.TwoLinkArm()
+>>> ctrl = ra.InertiaRelated(arm, Lam=2.5, Kv=10, Gamma=20, phi_hat0=[0, 0])   # Slotine–Li, Table 6.3.1
+>>> res = ra.simulate(ra.Plant(arm, [0.8, 2.3]), ctrl, ra.sinusoid(2), t_final=10, integrator=ra.RK4(1e-3))
+>>> res.status, res.phi_hat[-1].round(6).tolist()
+('ok', [0.8, 2.3])
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
 from importlib.metadata import version
-
-from ._moved import install
+from typing import Any
 
 __version__ = version("robotadapt")
-install()
+
+#: module (relative to the package) → the names the front door takes from it
+EXPORTS = {
+    "studies.scenarios": ("load", "available"),
+    "sim": ("simulate", "simulate_batch", "RK4", "Sampled", "SolveIVP", "SimulationResult"),
+    "plant": ("Plant", "sinusoidal_disturbance"),
+    "robots": ("OneLinkArm", "TwoLinkArm", "PolarArm", "PinocchioArm", "SymbolicArm"),
+    "controllers": ("PD", "PDGravity", "ComputedTorque", "AdaptiveComputedTorque", "InertiaRelated", "PassivityBased",
+                    "Composite", "SignRobust", "DCAL", "Repetitive", "pd_servo", "pid_servo", "state_space_servo"),
+    "controllers.adaptation": ("Gradient", "LandauPI", "SwitchingSigma"),
+    "trajectories": ("sinusoid", "sum_of_sines", "quintic", "constant", "exponential_step"),
+    "analysis.metrics": ("metrics",),
+    "report.files": ("save_result",),
+    "report.figures": ("save_figures",),
+}
+_WHERE = {name: module for module, names in EXPORTS.items() for name in names}
+__all__ = ["__version__", *_WHERE]
+
+
+def __getattr__(name: str) -> Any:
+    """`ra.<name>`: the object of that name in its module, imported now (PEP 562)."""
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module 'robotadapt' has no attribute {name!r}")
+    value = getattr(import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value  # the next access is a plain lookup
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))

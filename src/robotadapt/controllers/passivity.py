@@ -11,7 +11,7 @@ so that r = H⁻¹(s) e = ė + w (6.4.1), and the signals of (6.4.3) need no joi
 
 H(s) = (sI + G(s))⁻¹ has the realization (state [e; ξ], input r, output e) with state matrix [[−D, −C], [B, A]]: it is
 strictly proper by construction, and stable when every eigenvalue of that matrix has a negative real part, which
-:class:`ServoFilter` checks. The update law is any part of :mod:`robotadapt.adaptation` that satisfies (6.4.4).
+:class:`ServoFilter` checks. The update law is any part of :mod:`robotadapt.controllers.adaptation` that satisfies (6.4.4).
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
     τ = M(q) q̈ + V_m(q, q̇) q̇ + G(q) + F(q̇) + T_d(t, q, q̇)
 
 and what the real world adds (each optional, each composable): a payload and elastic joints
-(:mod:`robotadapt.unmodeled`), a DC motor per joint, torque and rate limits and a computational delay
-(:mod:`robotadapt.actuators`), and the measurement path of a sampled-data controller (:mod:`robotadapt.sensors`).
+(:mod:`robotadapt.plant.unmodeled`), a DC motor per joint, torque and rate limits and a computational delay
+(:mod:`robotadapt.plant.actuators`), and the measurement path of a sampled-data controller (:mod:`robotadapt.plant.sensors`).
 The true model may differ from the controller's (friction or geometry the controller's model lacks, a URDF truth).
 
 The plant's state is s = [q, q̇, θ, θ̇, i]: θ, θ̇ (motor side) with elastic joints, i (armature currents) with motors.
@@ -162,7 +162,7 @@ class Plant:
 
     def derivative(self, t: Array, s: Array, u: Array) -> Array:
         """ds/dt of the plant state s = [q, q̇, θ, θ̇, i] for the applied torque command u (module docstrings of
-        :mod:`robotadapt.unmodeled` and :mod:`robotadapt.actuators`)."""
+        :mod:`robotadapt.plant.unmodeled` and :mod:`robotadapt.plant.actuators`)."""
         n = self.model.n
         q, dq = s[..., :n], s[..., n : 2 * n]
         xp = array_namespace(s, u)

@@ -4,7 +4,7 @@ over initial states, initial estimates, Slotine–Li gains or sinusoid parameter
 Each of plant, controller and trajectory is one object shared by every run or a sequence of N objects, one per run,
 each validated when it was constructed. A sequence is merged into one object of the same class whose fields that
 differ between runs are stacked along a leading axis (:func:`stack`); models and controllers broadcast over it, so the
-step is the very code :func:`~robotadapt.simulation.simulate` runs. A field may differ only where the class's math
+step is the very code :func:`~robotadapt.sim.simulate` runs. A field may differ only where the class's math
 broadcasts it (`PER_RUN`); anything else raises :class:`NotBatchable` (simulate those runs one by one).
 
 Per run: a run whose state becomes non-finite or exceeds `max_state`, or whose controller stops (SimulationStop), is
@@ -119,7 +119,7 @@ def stack(items: Sequence[T], name: str) -> T:
 class BatchResult:
     """The logged states of N runs on one time grid: `z[k, i]` = [s, x] of run i at `t[k]` (plant state s = [q, q̇,
     …], controller state x), valid for `k < n_logged[i]` (a frozen run's record ends where it stopped). `status[i]` is
-    ``"ok"`` or ``"diverged at t=… s: reason"``, as for :func:`~robotadapt.simulation.simulate`. `wall_time` is the
+    ``"ok"`` or ``"diverged at t=… s: reason"``, as for :func:`~robotadapt.sim.simulate`. `wall_time` is the
     whole batch's; each run's metrics report its share, `wall_time / N`."""
 
     t: Array
@@ -145,7 +145,7 @@ class BatchResult:
         return {**self.info, "run": i} | ({"plant": plant.describe()} if plant.describe() else {})
 
     def run(self, i: int) -> SimulationResult:
-        """Run `i` as a :class:`~robotadapt.result.SimulationResult` (outputs recomputed as `simulate` does)."""
+        """Run `i` as a :class:`~robotadapt.sim.result.SimulationResult` (outputs recomputed as `simulate` does)."""
         i = range(len(self))[i]
         k, plant = int(self.n_logged[i]), self.plants[i]
         with np.errstate(all="ignore"):
@@ -237,7 +237,7 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
     `plant`, `controller`, `trajectory`: one object for every run, or a list of N (one per run; what may differ between
     them is listed in `PER_RUN`). `q0, dq0`: shape `(n,)` or `(N, n)`, default zero; `x0`: `(s,)` or `(N, s)`, default
     each run's `controller.initial_state(q0, dq0)`. N is the common length of the per-run arguments. Logging, the
-    divergence guard and the statuses are those of :func:`~robotadapt.simulation.simulate`, per run.
+    divergence guard and the statuses are those of :func:`~robotadapt.sim.simulate`, per run.
 
     Examples
     --------

@@ -80,7 +80,7 @@ _MAX_SUBSTEPS = 10**6
 class Sampled:
     """Sampled-data control: the controller runs only at t_k = k·Ts (`control_period` Ts, s) and its torque is held
     over [t_k, t_k + Ts) (zero-order hold); the plant is integrated by RK4 with the step `dt` = Ts/m, m whole (default:
-    the largest such step ≤ 1 ms). The controller sees the plant through its sensor (:mod:`robotadapt.sensors`; exact
+    the largest such step ≤ 1 ms). The controller sees the plant through its sensor (:mod:`robotadapt.plant.sensors`; exact
     samples without one); a controller with acceleration feedback gets q̈_m,k = (q̇_m,k − q̇_m,k−1)/Ts, the backward
     difference of the velocities it measured (0 at k = 0); a delay line (the repetitive law) holds T/Ts ticks.
 

@@ -19,7 +19,7 @@ class SimulationResult:
     `status` is ``"ok"`` or ``"diverged at t=… s: reason"``. `passivity` is the running integral ∫₀ᵗ −rᵀ Z φ̃ dσ of
     (6.4.4) for controllers with a regressor, when the truth is known: carried in the integrated state (RK4 at every
     step; the sum over the ticks in sampled-data runs), read at the logged instants (docs/monitors.md).
-    `monitors` holds signals that need the controller (robotadapt.monitors.controller_series): V_φ(t), λ_min(P⁻¹(t))."""
+    `monitors` holds signals that need the controller (robotadapt.sim.outputs.controller_series): V_φ(t), λ_min(P⁻¹(t))."""
 
     t: Array
     q: Array

@@ -6,12 +6,12 @@ Grid axes multiply; each grid point gets `n` random draws, uniform between the b
 entry). Run `i`'s seed is derived from its sweep point (the grid values, the draw index and the sweep's base seed) by a
 hash, so its random values do not depend on the order, the chunking or the machine that runs it.
 
-A chunk of runs is simulated together by :func:`robotadapt.batch.simulate_batch` when the varied fields allow it (true
+A chunk of runs is simulated together by :func:`robotadapt.sim.batch.simulate_batch` when the varied fields allow it (true
 parameters, initial states and estimates, Slotine–Li gains, sinusoid parameters), else scenario by scenario. Metrics
 come from states logged at most `LOG_SAMPLES` + 1 times per run (the last one at t_final where the step count allows).
 The output folder holds `sweep.json` (what was asked: rerunning with other arguments into the same folder is an error),
 `runs.jsonl` (one JSON object per run: `run`, `seed`, the swept values, the metrics of
-:meth:`~robotadapt.result.SimulationResult.metrics` less the wall time; sorted by run when the sweep completes) and
+:meth:`~robotadapt.sim.result.SimulationResult.metrics` less the wall time; sorted by run when the sweep completes) and
 `sweep.png` (a metric against every swept key).
 """
 

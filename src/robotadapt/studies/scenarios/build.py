@@ -64,9 +64,9 @@ REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
         "state_space": ("controllers.passivity:state_space_servo", "n"),
     },
     "law": {
-        "gradient": ("adaptation:Gradient", "p"),
-        "landau_pi": ("adaptation:LandauPI", "p"),
-        "sigma": ("adaptation:SwitchingSigma", "p"),
+        "gradient": ("controllers.adaptation:Gradient", "p"),
+        "landau_pi": ("controllers.adaptation:LandauPI", "p"),
+        "sigma": ("controllers.adaptation:SwitchingSigma", "p"),
     },
 }
 # other names of a kind: the same constructor (the book calls Slotine–Li's law the inertia-related one, Table 6.3.1)

@@ -72,7 +72,7 @@ class Scenario:
         return tomli_w.dumps(self.setup.data or self.data)
 
     def run(self, progress: bool = False) -> Any:
-        """Simulate this scenario; returns a :class:`~robotadapt.result.SimulationResult`."""
+        """Simulate this scenario; returns a :class:`~robotadapt.sim.result.SimulationResult`."""
         from ...sim.simulation import simulate
 
         s = self.setup
