@@ -290,3 +290,69 @@ def test_outputs_evaluated_by_jax_equal_the_numpy_ones(name, monkeypatch):
     assert evaluated  # JAX evaluated the maps (no fallback to numpy)
     for a, b in zip(jax_runs, numpy_runs, strict=True):
         assert_same_run(a, b)
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# Sampled-data runs batch too (issue 23): one program mapped over the runs, or numpy run by run
+
+
+@pytest.mark.parametrize("backend", ["numpy", "jax"])
+def test_sampled_runs_batch_and_each_equals_its_single_run(backend):
+    """Example 6.3.1 at Ts = 2 ms with Kv drawn per run, an actuator limit and a noisy encoder with a seed per run: each
+    run of the batch is the numpy single run of its own setup (numpy: to 1e-12; compiled and mapped over the runs:
+    to 1e-9), its logged torques, measurements and tick-sum passivity included."""
+    from robotadapt.sim import Sampled
+
+    kvs = (5.0, 12.5, 20.0)
+    sets = ["simulation.control_period=0.002", "simulation.t_final=0.6", "plant.torque_limit=60", "plant.noise_q=1e-4"]
+    setups = [load("example-6.3.1", [*sets, f"controller.Kv={kv}", f"plant.seed={i}"]).setup
+              for i, kv in enumerate(kvs)]
+    batch = simulate_batch([s.plant for s in setups], [s.controller for s in setups], [s.trajectory for s in setups],
+                           t_final=0.6, integrator=Sampled(0.002, backend=backend), log_every=3)
+    assert batch.info["backend"] == backend and batch.ok.all()
+    tol = 1e-12 if backend == "numpy" else 1e-9
+    for i, (s, together) in enumerate(zip(setups, batch.runs(), strict=True)):
+        single = simulate(s.plant, s.controller, s.trajectory, t_final=0.6, log_every=3,
+                          integrator=Sampled(0.002, backend="numpy"))
+        assert together.status == single.status and metrics(together)["passivity_form"] == "tick sum"
+        for name in (*ARRAYS, "monitors"):
+            a, b = getattr(together, name), getattr(single, name)
+            pairs = [(k, a[k], b[k]) for k in b] if name == "monitors" else [(name, a, b)]
+            for key, u, v in pairs:
+                np.testing.assert_allclose(u, v, rtol=0, atol=tol * max(1.0, float(np.abs(v).max())), err_msg=key)
+        assert_same_run(batch.run(i), together)
+    assert not np.allclose(batch.run(0).monitors["q_measured"] - batch.run(0).q,
+                           batch.run(1).monitors["q_measured"] - batch.run(1).q)  # each run its own seed
+
+
+@pytest.mark.parametrize("backend", ["numpy", "jax"])
+def test_a_sampled_run_that_diverges_is_frozen_and_the_others_go_on(backend):
+    from robotadapt.sim import Sampled
+
+    plant, ctrl, traj = Plant(ARM, PHI), slotine_li(), sinusoid(2)
+    dq0 = np.array([[0.0, 0.0], [30.0, -30.0], [0.1, 0.0]])
+    kw = dict(t_final=0.3, max_state=40.0, log_every=5)
+    batch = simulate_batch(plant, ctrl, traj, dq0=dq0, integrator=Sampled(0.002, backend=backend), **kw)
+    assert [st == "ok" for st in batch.status] == [True, False, True]
+    for i in range(3):
+        single = simulate(plant, ctrl, traj, dq0=dq0[i], integrator=Sampled(0.002, backend="numpy"), **kw)
+        assert batch.run(i).status == single.status
+        np.testing.assert_allclose(batch.run(i).q, single.q, rtol=0, atol=1e-9)
+    frozen = batch.z[batch.n_logged[1] - 1 :, 1]
+    assert np.all(frozen == frozen[0])
+
+
+def test_what_cannot_batch_in_sampled_time_is_named():
+    """A law setting that is a scalar of the program (the composite law's filter pole) differs: NotBatchable naming
+    `simulation`, so the sweep runs them one by one; a MuJoCo plant is stepped on the host: a ConfigError naming
+    `plant.engine`."""
+    from robotadapt.sim import Sampled
+
+    s = load("example-6.6.3").setup
+    with pytest.raises(NotBatchable, match=r"^simulation: the runs differ in more than their arrays"):
+        simulate_batch(s.plant, [s.controller, dataclasses.replace(s.controller, a=2.0)], s.trajectory,
+                       t_final=0.01, integrator=Sampled(0.002, backend="jax"))
+    pytest.importorskip("mujoco")
+    m = load("example-6.3.1", ["plant.engine='mujoco'"]).setup
+    with pytest.raises(ConfigError, match=r"^plant\.engine: a MuJoCo plant is stepped by MuJoCo, one run at a time"):
+        simulate_batch([m.plant, m.plant], m.controller, m.trajectory, t_final=0.01, integrator=m.integrator)

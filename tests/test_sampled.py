@@ -315,14 +315,14 @@ def both(monkeypatch: pytest.MonkeyPatch, run: Any) -> tuple[Any, Any]:
     from robotadapt.sim import compiled_sampled, sampled
 
     calls: list[int] = []
-    compiled = compiled_sampled.integrate
+    compiled = compiled_sampled.integrate_batch
 
     def counting(*args: Any, **kw: Any) -> Any:
         calls.append(1)
         return compiled(*args, **kw)
 
     original = sampled.integrate
-    monkeypatch.setattr(compiled_sampled, "integrate", counting)
+    monkeypatch.setattr(compiled_sampled, "integrate_batch", counting)
     monkeypatch.setattr(sampled, "integrate", _forced(original, "numpy"))
     a = run()
     monkeypatch.setattr(sampled, "integrate", _forced(original, "jax"))

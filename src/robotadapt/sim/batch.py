@@ -131,6 +131,7 @@ class BatchResult:
     trajectories: tuple[Any, ...]
     wall_time: float
     info: dict[str, Any]
+    logged: dict[str, Array] | None = None  # sampled-data runs: the signals the ticks logged, `(T, N, n)` each
 
     def __len__(self) -> int:
         return int(self.z.shape[1])
@@ -149,8 +150,9 @@ class BatchResult:
         i = range(len(self))[i]
         k, plant = int(self.n_logged[i]), self.plants[i]
         with np.errstate(all="ignore"):
+            logged = None if self.logged is None else {name: a[:k, i] for name, a in self.logged.items()}
             return outputs(ClosedLoop(plant, self.controllers[i], plant.model.n, monitored=True), self.trajectories[i],
-                           self.t[:k], self.z[:k, i], self.status[i], self.wall_time / len(self), self._info(i))
+                           self.t[:k], self.z[:k, i], self.status[i], self.wall_time / len(self), self._info(i), logged)
 
     def runs(self) -> list[SimulationResult]:
         """Every run's record, equal to `[self.run(i) for i in range(N)]`; their outputs computed together, by the
@@ -159,11 +161,14 @@ class BatchResult:
         N = len(self)
         if (self.n_logged < len(self.t)).any() or any(p.varies for p in self.plants) or N < 2:
             return [self.run(i) for i in range(N)]
-        loop = ClosedLoop(stack(self.plants, "plant"), stack(self.controllers, "controller"), self.plants[0].model.n,
-                          monitored=True)
+        try:
+            loop = ClosedLoop(stack(self.plants, "plant"), stack(self.controllers, "controller"),
+                              self.plants[0].model.n, monitored=True)
+        except NotBatchable:  # sampled-data runs may differ in more than PER_RUN: their outputs run by run
+            return [self.run(i) for i in range(N)]
         with np.errstate(all="ignore"):
             return batch_outputs(loop, self.controllers, stack(self.trajectories, "trajectory"), self.t, self.z,
-                                 self.status, self.wall_time / N, [self._info(i) for i in range(N)])
+                                 self.status, self.wall_time / N, [self._info(i) for i in range(N)], self.logged)
 
 
 
@@ -200,7 +205,8 @@ class _Runs:
     x0: Array
 
 
-def _runs(plant: Any, controller: Any, trajectory: Any, q0: Any, dq0: Any, x0: Any, integrator: RK4) -> _Runs:
+def _runs(plant: Any, controller: Any, trajectory: Any, q0: Any, dq0: Any, x0: Any,
+          integrator: RK4 | Sampled) -> _Runs:
     seqs = _sequence(plant), _sequence(controller), _sequence(trajectory)
     sizes = {"plant": len(seqs[0]), "controller": len(seqs[1]), "trajectory": len(seqs[2]), "plant.q0": _leading(q0),
              "plant.dq0": _leading(dq0), "x0": _leading(x0)}
@@ -221,8 +227,14 @@ def _runs(plant: Any, controller: Any, trajectory: Any, q0: Any, dq0: Any, x0: A
         plants[idx[0]].check_state(q0s[idx])
         check_plant_step(plants[idx[0]], integrator)
     s0 = np.stack([p.initial_state(q0s[i], dq0s[i]) for i, p in enumerate(plants)])
-    if x0 is None:
-        x0s = np.stack([np.asarray(c.initial_state(q0s[i], dq0s[i]), dtype=float) for i, c in enumerate(controllers)])
+    if x0 is None:  # from what each law sees first, as in `simulate`: the sensor's tick-0 measurement when sampled
+        def seen(i: int) -> tuple[Array, Array]:
+            sensor = plants[i].sensor
+            if isinstance(integrator, Sampled) and sensor is not None:
+                return sensor.first_measurement(q0s[i], dq0s[i], integrator.control_period)
+            return q0s[i], dq0s[i]
+
+        x0s = np.stack([np.asarray(c.initial_state(*seen(i)), dtype=float) for i, c in enumerate(controllers)])
     else:
         x0s = _per_run(x0, N, int(np.shape(x0)[-1]), "x0")
     return _Runs(plants, controllers, trajectories, q0s, dq0s, s0, x0s)
@@ -256,13 +268,15 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
     (True, True)
     """
     integrator = RK4() if integrator is None else integrator
-    if not isinstance(integrator, RK4):
-        raise NotBatchable("simulation.method", "a batch steps every run with the fixed-step 'rk4' in continuous "
-                           f"time; simulate {type(integrator).__name__} runs one by one")
+    if not isinstance(integrator, RK4 | Sampled):
+        raise NotBatchable("simulation.method", "a batch steps every run with fixed steps ('rk4', or sampled-data "
+                           f"ticks); simulate {type(integrator).__name__} runs one by one")
     t_final = as_scalar(t_final, "simulation.t_final", positive=True)
     if isinstance(log_every, bool) or not isinstance(log_every, int) or log_every < 1:
         raise ConfigError("simulation.log_every", f"must be a positive integer, got {log_every!r}")
     runs = _runs(plant, controller, trajectory, q0, dq0, x0, integrator)
+    if isinstance(integrator, Sampled):
+        return _sampled_batch(runs, integrator, t_final, log_every, max_state, progress, dict(info or {}))
     dt, (N, n) = integrator.dt, runs.q0.shape
     n_steps = int(np.ceil(t_final / dt - 1e-9))
     log_bytes = 8.0 * (n_steps // log_every + 1) * N * (runs.s0.shape[1] + runs.x0.shape[1])
@@ -294,6 +308,49 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
         t, z, n_logged, status = _integrate(loop, single, traj, z0, dt, n_steps, log_every, max_state, progress, line)
     return BatchResult(t, z, n_logged, tuple(status), runs.plants, controllers, runs.trajectories,
                        time.perf_counter() - wall, dict(info or {}))
+
+
+def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, max_state: float, progress: bool,
+                   info: dict[str, Any]) -> BatchResult:
+    """:func:`simulate_batch` of sampled-data runs: the runs' ticks compiled into one program mapped over the runs
+    (:func:`robotadapt.sim.sampled.integrate_batch`), or stepped one by one by numpy; the runs must share one
+    program's shape (they differ in arrays: gains, tables, true parameters), else NotBatchable."""
+    from .sampled import integrate_batch
+
+    Ts, (N, n) = opts.control_period, runs.q0.shape
+    n_ticks = int(np.ceil(t_final / Ts - 1e-9))
+    log_bytes = 8.0 * (n_ticks // log_every + 1) * N * (runs.s0.shape[1] + runs.x0.shape[1] + 2 + 4 * n)
+    if log_bytes > MAX_LOG_BYTES:
+        raise ConfigError("simulation.log_every", f"{N} runs of {n_ticks} ticks would keep a {log_bytes / 1e9:.3g} "
+                          "GB log; log every more ticks")
+    controllers = _prepared(runs.controllers, runs.trajectories, Ts, t_final)
+    loops = [ClosedLoop(p, controllers[i], n, monitored=True) for i, p in enumerate(runs.plants)]
+    lines = None
+    if isinstance(controllers[0], HasDelayLine):
+        lines = [np.array(c.delay_line(Ts, runs.q0[i], runs.dq0[i]), dtype=float) for i, c in enumerate(controllers)]
+    first = runs.trajectories[0]
+    traj = first if all(_same(tr, first) for tr in runs.trajectories[1:]) else list(runs.trajectories)
+    z0 = np.stack([loop.start(runs.s0[i], runs.x0[i]) for i, loop in enumerate(loops)])
+    traceable = all(p.model.traceable for p in runs.plants) and all(c.model.traceable for c in controllers)
+    backend = choose_backend(opts.backend, n_ticks * N, traceable)
+    wall = time.perf_counter()
+    try:
+        try:
+            t, z, n_logged, status, logged = integrate_batch(loops, traj, z0, opts, n_ticks, log_every, max_state,
+                                                             progress, lines, backend)
+        except ConfigError as exc:  # "auto" steps a law whose code JAX cannot trace (a user's numpy code) with numpy
+            if opts.backend != "auto" or exc.field != "simulation.backend":
+                raise
+            backend = "numpy"
+            t, z, n_logged, status, logged = integrate_batch(loops, traj, z0, opts, n_ticks, log_every, max_state,
+                                                             progress, lines, backend)
+    except ConfigError as exc:
+        if exc.field == "simulation":
+            raise NotBatchable(exc.field, exc.reason) from None
+        raise
+    info = {**info, "sampling": opts.describe(), "backend": backend}
+    return BatchResult(t, z, n_logged, tuple(status), runs.plants, controllers, runs.trajectories,
+                       time.perf_counter() - wall, info, logged)
 
 
 def _prepared(controllers: tuple[Any, ...], trajectories: tuple[Any, ...], dt: float, t_final: float) -> tuple[Any, ...]:

@@ -15,7 +15,8 @@ whose code needs concrete values) become a ConfigError naming `simulation.backen
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -112,46 +113,97 @@ def _program(tick: SampledTick, log_every: int) -> tuple[Callable[..., Any], lis
     return run, leaves
 
 
-def integrate(tick: SampledTick, carry: Any, traj: Trajectory, n_ticks: int,
-              log_every: int) -> tuple[Array, tuple[Array, ...], str]:
-    """Ticks 0 … `n_ticks` of `tick` from `carry` (:meth:`robotadapt.sim.sampled.Tick.start`): the logged times, the
-    logged records (each field stacked over the logged ticks) and the status, as the numpy driver gives them."""
+_BATCHED: dict[Any, Callable[..., Any]] = {}
+
+
+def _unseeded(tick: SampledTick) -> Any:
+    """The tick with its sensor's seed set aside: the noise is drawn on the host from each run's own seed, so runs
+    that differ only in it share one program."""
+    loop, plant = tick.loop, tick.loop.plant
+    if plant.sensor is not None:
+        loop = replace(loop, plant=replace(plant, sensor=replace(plant.sensor, seed=0)))
+    return replace(tick, loop=loop, sensor=replace(tick.sensor, seed=0))  # type: ignore[type-var]
+
+
+def integrate_batch(ticks: Sequence[SampledTick], carries: list[Any], traj: Trajectory | list[Trajectory], n_ticks: int,
+                    log_every: int) -> tuple[Array, tuple[Array, ...], Array, list[str]]:
+    """N runs' ticks in one program, the single run's program mapped over a leading run axis (`jax.vmap`): the runs'
+    ticks must have one skeleton (their float arrays, gains and true parameters, may differ), else a ConfigError
+    naming `simulation`. `traj`: one trajectory for every run, or one per run. Returns the logged times, the records
+    `(T, N, ...)` (a stopped run's rows after its stop repeat its last one), each run's logged count and its status."""
     jax = jax_module()
-    jnp = jax.numpy
+    jnp, tree = jax.numpy, jax.tree_util
+    N, tick = len(ticks), ticks[0]
     n, Ts = tick.loop.n, tick.opts.control_period
+    run, arrays = _program(tick, log_every)
+    key = (skeleton(_unseeded(tick), []), log_every)
+    per_run = [arrays]
+    for other in ticks[1:]:
+        leaves: list[Array] = []
+        if skeleton(_unseeded(other), leaves) != key[0]:
+            raise ConfigError("simulation", "the runs differ in more than their arrays (a law's kind, a flag, a scalar "
+                              "setting); one batch of sampled-data runs varies gains, tables and true parameters only")
+        per_run.append(leaves)
+    shared = not isinstance(traj, list)
+    noisy = any(t.sensor.noise_q is not None or t.sensor.noise_dq is not None for t in ticks)
+    mapped = (key, shared, noisy)
+    if mapped not in _BATCHED:
+        if len(_BATCHED) >= _MAX_PROGRAMS:
+            _BATCHED.pop(next(iter(_BATCHED)))
+        axes = (None, None, None if shared else 0, 0 if noisy else None)  # k, t, the reference, the noise
+        _BATCHED[mapped] = jax.jit(jax.vmap(run, in_axes=(0, 0, axes, None, None)))
+    batched = _BATCHED[mapped]
     blocks = n_ticks // log_every + 1  # a block per logged tick; the last one runs on to t_final and is padded
-    tick_bytes = 8 * (5 * n + 2)  # reference (3n), noise (2n), k and t
+    tick_bytes = 8 * (2 + (3 * n) * (1 if shared else N) + 2 * n * (N if noisy else 1))  # k, t, reference, noise
     most = max(1, int(min(CHUNK_STEPS, REF_BYTES // tick_bytes)) // log_every)
     per_call = min(most, 1 << max(0, blocks - 1).bit_length())  # a power of two: fewer shapes, fewer compilations
-    run, arrays = _program(tick, log_every)
-    rng = tick.sensor.generator()
-
-    bad = (jnp.zeros(n), jnp.zeros(carry[1].size)) if tick.loop.guarded else None  # where a guard failed: (q, x)
-    state = (jax.tree_util.tree_map(jnp.asarray, carry), jnp.asarray(True), jnp.asarray(np.nan), jnp.asarray(0), bad)
-    blank = jax.tree_util.tree_map(jnp.asarray, tick.blank(carry))
+    rngs = [t.sensor.generator() for t in ticks]
+    bad = (jnp.zeros((N, n)), jnp.zeros((N, carries[0][1].size))) if tick.loop.guarded else None
+    state = (tree.tree_map(lambda *a: jnp.asarray(np.stack(a)), *carries), jnp.ones(N, bool), jnp.full(N, np.nan),
+             jnp.zeros(N, int), bad)
+    stacked_arrays = [jnp.asarray(np.stack(parts)) for parts in zip(*per_run, strict=True)]
+    blank = tree.tree_map(jnp.asarray, tick.blank(carries[0]))
     records, logged = [], []
     for first in range(0, blocks, per_call):
-        ticks = np.arange(first * log_every, (first + per_call) * log_every)
-        real = int(np.sum(ticks <= n_ticks))
-        ref = traj(Ts * np.minimum(ticks, n_ticks))
-        noise = np.concatenate([tick.sensor.noise(rng, real), np.zeros((ticks.size - real, 2, n))])
+        ticks_k = np.arange(first * log_every, (first + per_call) * log_every)
+        real = int(np.sum(ticks_k <= n_ticks))
         shape = (per_call, log_every)
-        xs = (ticks.reshape(shape), (Ts * ticks).reshape(shape),
-              Reference(*(np.asarray(a, dtype=float).reshape(shape + (n,)) for a in ref)), noise.reshape(shape + (2, n)))
+        times = Ts * np.minimum(ticks_k, n_ticks)
+        if not isinstance(traj, list):
+            ref = Reference(*(np.asarray(a, dtype=float).reshape(shape + (n,)) for a in traj(times)))
+        else:
+            ref = Reference(*(np.stack([np.asarray(a, dtype=float).reshape(shape + (n,)) for a in parts]) for parts in
+                              zip(*(tr(times) for tr in traj), strict=True)))
+        draws = [np.concatenate([t.sensor.noise(rng, real), np.zeros((ticks_k.size - real, 2, n))]).reshape(
+            shape + (2, n)) for t, rng in zip(ticks, rngs, strict=True)] if noisy else [np.zeros(shape + (2, n))]
+        xs = (ticks_k.reshape(shape), (Ts * ticks_k).reshape(shape), ref, np.stack(draws) if noisy else draws[0])
         try:
-            state, (record, alive) = run(arrays, state, xs, n_ticks, blank)
+            if N == 1:  # the single run's own program: its round-off is the numpy driver's order of operations
+                one = tree.tree_map(lambda a: a[0], (stacked_arrays, state, xs[2] if not shared else None,
+                                                     xs[3] if noisy else None))
+                xs1 = (xs[0], xs[1], xs[2] if shared else one[2], one[3] if noisy else xs[3])
+                state, out = run(one[0], one[1], xs1, n_ticks, blank)
+                state, (record, alive) = tree.tree_map(lambda a: a[None], (state, out))
+            else:
+                state, (record, alive) = batched(stacked_arrays, state, xs, n_ticks, blank)
         except Exception as exc:  # tracing met code that needs concrete values
             loop = tick.loop
             name = f"{type(loop.controller).__name__} on {type(loop.plant.model).__name__}"
             raise ConfigError("simulation.backend", f"{name} cannot be compiled with JAX ({type(exc).__name__}: "
                               f"{(str(exc).splitlines() or [''])[0][:120]}); use backend = 'numpy'") from None
         keep = min(per_call, blocks - first)
-        records.append([np.asarray(a)[:keep] for a in record])
-        logged.append(np.asarray(alive)[:keep])
-        if not bool(state[1]):
+        records.append([np.moveaxis(np.asarray(a), 0, 1)[:keep] for a in record])
+        logged.append(np.moveaxis(np.asarray(alive), 0, 1)[:keep])
+        if not bool(np.asarray(state[1]).any()):
             break
-    count = int(np.concatenate(logged).sum())
-    stacked = tuple(np.concatenate(parts)[:count] for parts in zip(*records, strict=True))
-    bad = (None, None) if state[4] is None else state[4]
-    status = tick.status(float(state[2]), int(state[3]), *bad)
-    return Ts * (log_every * np.arange(count)), stacked, status
+    alive_rows = np.concatenate(logged)
+    n_logged = alive_rows.sum(axis=0)
+    out = tuple(np.concatenate(parts) for parts in zip(*records, strict=True))
+    for i, k in enumerate(n_logged):  # a stopped run: its last logged row for the rest of the log
+        for a in out:
+            a[k:, i] = a[max(k - 1, 0), i]
+    T = int(n_logged.max())
+    bad_q, bad_x = (None, None) if state[4] is None else (np.asarray(state[4][0]), np.asarray(state[4][1]))
+    status = [t.status(float(state[2][i]), int(state[3][i]), None if bad_q is None else bad_q[i],
+                       None if bad_x is None else bad_x[i]) for i, t in enumerate(ticks)]
+    return Ts * (log_every * np.arange(T)), tuple(a[:T] for a in out), n_logged, status

@@ -45,12 +45,13 @@ def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status
 
 
 def batch_outputs(loop: ClosedLoop, controllers: tuple[Any, ...], trajectory: Trajectory, t: Array, z: Array,
-                  status: tuple[str, ...], wall: float, info: list[dict[str, Any]]) -> list[SimulationResult]:
+                  status: tuple[str, ...], wall: float, info: list[dict[str, Any]],
+                  logged: dict[str, Array] | None = None) -> list[SimulationResult]:
     """:func:`outputs` of N runs logged together, `z` `(T, N, m)` (every run logged at every `t`), computed once
     for the batch by the merged `loop` (gains stacked over the runs) and `trajectory`: run i's record is its slice,
     with `controllers[i]` for the signals that need one run's controller. The plant's φ must not change during the
-    runs (no payload attached after t = 0)."""
-    signals, extras = _signals(loop, trajectory, t, t[:, None], z, None)
+    runs (no payload attached after t = 0). `logged`: as for :func:`outputs`, `(T, N, n)`."""
+    signals, extras = _signals(loop, trajectory, t, t[:, None], z, logged)
     truth = signals.pop("truth")
     out = []
     for i, ctrl in enumerate(controllers):

@@ -293,24 +293,44 @@ class Tick:
         return {name: getattr(records, name) for name in keep}
 
 
+def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory], z0: Array, opts: Sampled,
+                    n_ticks: int, log_every: int, max_state: float, progress: bool, lines: list[Array] | None,
+                    backend: str = "numpy") -> tuple[Array, Array, Array, list[str], dict[str, Array]]:
+    """N runs' ticks 0 … `n_ticks`: compiled together (`backend` "jax", :func:`compiled_sampled.integrate_batch`, one
+    program mapped over the runs) or one by one by the numpy driver (the reference). `traj`: one trajectory for every
+    run or one per run; `z0` `(N, d)`; `lines` each run's delay line contents (None: no line). Returns the logged
+    times, the states `(T, N, d)`, each run's logged count (a stopped run's rows after it repeat its last one), the
+    statuses and the logged signals `(T, N, n)` (:meth:`Tick.logged`)."""
+    ticks = [Tick(loop, opts, loop.plant.sensor or Sensor(loop.n), loop.plant.actuator or Actuator(loop.n), max_state,
+                  lines is not None) for loop in loops]
+    carries = [tick.start(z0[i], None if lines is None else lines[i]) for i, tick in enumerate(ticks)]
+    trajs = traj if isinstance(traj, list) else [traj] * len(loops)
+    if backend == "jax":
+        from .compiled_sampled import integrate_batch as compiled
+
+        t, records, n_logged, status = compiled(ticks, carries, traj, n_ticks, log_every)
+        logged = Record(*records)
+    else:
+        runs = [_run(tick, carry, trajs[i], n_ticks, log_every, progress) for i, (tick, carry) in
+                enumerate(zip(ticks, carries, strict=True))]
+        n_logged = np.array([len(t) for t, _, _ in runs])
+        t = max((t for t, _, _ in runs), key=len)
+        status = [st for _, _, st in runs]
+        logged = Record(*(np.stack([np.concatenate([a, np.repeat(a[-1:], len(t) - len(a), axis=0)]) for a in parts],
+                                   axis=1) for parts in zip(*(rec for _, rec, _ in runs), strict=True)))
+    return t, logged.z, n_logged, status, ticks[0].logged(logged)
+
+
 def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: int, log_every: int,
               max_state: float, progress: bool, line: DelayLine | None,
               backend: str = "numpy") -> tuple[Array, Array, str, dict[str, Array]]:
     """Ticks 0 … `n_ticks` from t = 0, stepped by numpy (`backend` "numpy") or compiled by JAX ("jax"; the same tick,
     equal to round-off; `progress` is not shown); returns the logged (t, z), the status and the logged signals
-    (:meth:`Tick.logged`). `line` gives the delay line's initial contents; it is not written."""
-    n = loop.n
-    tick = Tick(loop, opts, loop.plant.sensor or Sensor(n), loop.plant.actuator or Actuator(n), max_state,
-                line is not None)
-    carry = tick.start(z0, None if line is None else line.buffer)
-    if backend == "jax":
-        from .compiled_sampled import integrate as compiled
-
-        t, records, status = compiled(tick, carry, traj, n_ticks, log_every)
-        logged = Record(*records)
-    else:
-        t, logged, status = _run(tick, carry, traj, n_ticks, log_every, progress)
-    return t, logged.z, status, tick.logged(logged)
+    (:meth:`Tick.logged`). `line` gives the delay line's initial contents; it is not written. One run of
+    :func:`integrate_batch`."""
+    t, z, _, status, logged = integrate_batch([loop], traj, np.asarray(z0)[None], opts, n_ticks, log_every, max_state,
+                                              progress, None if line is None else [line.buffer], backend)
+    return t, z[:, 0], status[0], {name: a[:, 0] for name, a in logged.items()}
 
 
 def _run(tick: Tick, carry: Carry, traj: Trajectory, n_ticks: int, log_every: int,
