@@ -7,7 +7,8 @@
    plain loop's final state.
 2. The sweep end to end, as a user types it: `robotadapt sweep example-6.3.1 --random controller.Kv=5:20 --n N
    --backend B` (10 s per run; process start, loading, compilation with an empty cache, chunking, writing the table and
-   the figure included) on the local cores, with the peak resident memory of its largest process.
+   the figure included) on the local cores, with the peak resident memory of its largest process; and the same sweep
+   of sampled-data runs, `--control-period 0.002` (a digital controller at 500 Hz, the runs batched and compiled).
 3. The same sweep (runs of `DASK_T_FINAL` s) through a Dask `LocalCluster` of 1 and of 2 single-threaded worker
    processes.
 
@@ -79,11 +80,11 @@ def batch_table() -> None:
                   f"{loop * N / seconds:>11.1f}x {ivp * N / seconds:>12.1f}x {diff:>10.1e}")
 
 
-def sweep_end_to_end(runs: int, loop_10s: float, backend: str) -> None:
+def sweep_end_to_end(runs: int, loop_10s: float, backend: str, extra: tuple[str, ...] = ()) -> None:
     """The sweep as a user types it, in a fresh process with an empty compilation cache (compilation included)."""
     with tempfile.TemporaryDirectory() as out, tempfile.TemporaryDirectory() as cache:
         cmd = [sys.executable, "-m", "robotadapt", "sweep", "example-6.3.1", "--random", "controller.Kv=5:20",
-               "--n", str(runs), "--backend", backend, "--out", out]
+               "--n", str(runs), "--backend", backend, *extra, "--out", out]
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, ROBOTADAPT_CACHE=cache))
         seconds = time.perf_counter() - t0
@@ -119,12 +120,16 @@ def main() -> None:
     parser.add_argument("--sweep-runs", type=int, default=10_000)
     parser.add_argument("--dask-runs", type=int, default=2000)
     parser.add_argument("--sweep-backends", default="jax,numpy", help="backends of the end-to-end sweep")
+    parser.add_argument("--only-sweeps", action="store_true", help="the end-to-end sweeps only (no table, no Dask)")
     args = parser.parse_args()
-    batch_table()
+    if not args.only_sweeps:
+        batch_table()
     loop_10s = timed(naive_rk4, 3)[0]
     for backend in args.sweep_backends.split(","):
         sweep_end_to_end(args.sweep_runs, loop_10s, backend)
-    dask_scaling(args.dask_runs)
+    sweep_end_to_end(args.sweep_runs, loop_10s, "auto", ("--control-period", "0.002"))
+    if not args.only_sweeps:
+        dask_scaling(args.dask_runs)
 
 
 if __name__ == "__main__":

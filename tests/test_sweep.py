@@ -121,6 +121,28 @@ def test_rows_are_the_metrics_of_single_runs(tmp_path):
             np.testing.assert_allclose(row[key], value, rtol=1e-11, atol=1e-13, err_msg=key)
 
 
+def test_sampled_data_runs_are_vectorized_and_each_row_is_its_single_run(tmp_path):
+    """`robotadapt sweep example-6.3.1 --control-period 0.002 --random controller.Kv=5:20`: the chunk runs batched and
+    compiled (one program mapped over the runs; before issue 23 "simulate Sampled runs one by one"), and a row's
+    metrics equal those of the numpy single run with its K_v to 1e-9."""
+    from robotadapt.sim import Sampled
+
+    s = scenario(["simulation.control_period=0.002", "simulation.backend='jax'"])
+    sw = make_sweep(s, [], ["controller.Kv=5:20"], n=3)
+    report = run_sweep(sw, tmp_path, workers=1)
+    assert report.computed == 3 and report.how == "vectorized (simulate_batch)"
+    rows = read_table(tmp_path / "runs.jsonl")
+    for point in sw.points():
+        st = load("example-6.3.1", SHORT + ["simulation.control_period=0.002",
+                                            f"controller.Kv={point.inputs['controller.Kv']!r}"]).setup
+        single = metrics(simulate(st.plant, st.controller, st.trajectory, t_final=st.t_final,
+                                  integrator=Sampled(0.002, backend="numpy"), log_every=log_every(st)))
+        row = rows[point.run]
+        assert row["passivity_form"] == "tick sum" and row["status"] == "ok"
+        for key in ("rms_error_norm", "final_phi_hat", "passivity_min", "ise", "control_energy"):
+            np.testing.assert_allclose(row[key], single[key], rtol=1e-9, atol=1e-12, err_msg=key)
+
+
 def test_keys_that_do_not_batch_run_scenario_by_scenario(tmp_path):
     sw = make_sweep(scenario(), ["robot.l2=0.9,1.1"])
     report = run_sweep(sw, tmp_path, workers=1)

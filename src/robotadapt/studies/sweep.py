@@ -37,7 +37,7 @@ import numpy as np
 from ..analysis.metrics import metrics
 from ..files import atomic_write, writable_dir
 from ..sim.batch import NotBatchable, simulate_batch
-from ..sim.simulation import RK4, simulate
+from ..sim.simulation import RK4, Sampled, simulate
 from ..validation import ConfigError, as_array
 from .scenarios import Scenario
 from .scenarios.build import Setup, setup
@@ -168,11 +168,14 @@ def make_sweep(scenario: Scenario, grid: Sequence[str] = (), random: Sequence[st
 
 
 def log_every(s: Setup) -> int:
-    """Steps between logged states: at least the scenario's own, at most `LOG_SAMPLES` samples, and a divisor of the
-    step count where one is close (so t_final is logged)."""
-    if not isinstance(s.integrator, RK4):
+    """Steps (control ticks, sampled-data) between logged states: at least the scenario's own, at most `LOG_SAMPLES`
+    samples, and a divisor of the step count where one is close (so t_final is logged)."""
+    if isinstance(s.integrator, Sampled):
+        steps = math.ceil(s.t_final / s.integrator.control_period - 1e-9)
+    elif isinstance(s.integrator, RK4):
+        steps = math.ceil(s.t_final / s.integrator.dt - 1e-9)
+    else:
         return s.log_every
-    steps = math.ceil(s.t_final / s.integrator.dt - 1e-9)
     least = max(s.log_every, math.ceil(steps / LOG_SAMPLES))
     return next((k for k in range(least, 2 * least + 1) if steps % k == 0), least)
 
