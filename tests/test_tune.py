@@ -183,3 +183,62 @@ def test_the_replaced_gain_reaches_the_step():
     other = replace_at(loop, ("controller", "Kv"), 3.0 * np.eye(2))
     assert other.controller.Kv[0, 0] == 3.0 and loop.controller.Kv[0, 0] == 10.0
     assert other.plant is loop.plant
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# Tuning sampled-data runs (issue 23): the tick under a checkpointed scan, as the RK4 step
+
+
+SAMPLED = ["simulation.t_final=0.6", "simulation.backend='jax'", "simulation.control_period=0.004",
+           "plant.noise_q=1e-4"]
+
+
+def test_the_differentiable_sampled_run_is_the_compiled_forward_run():
+    """Example 6.3.1 at 250 Hz with a noisy encoder: the scanned tick (SampledRollout) gives the errors and the held
+    torques of the compiled sampled-data run, to 1e-9, its noise drawn from the same seed."""
+    from robotadapt.plant.sensors import Sensor
+    from robotadapt.sim.gradient import SampledRollout
+
+    scenario = load("example-6.3.1", SAMPLED)
+    s = scenario.setup
+    reference = scenario.run()
+    loop = ClosedLoop(s.plant, s.controller, 2)
+    q_m, dq_m = s.plant.sensor.first_measurement(s.q0, s.dq0, 0.004)
+    z0 = np.concatenate([s.plant.initial_state(s.q0, s.dq0), s.controller.initial_state(q_m, dq_m)])
+    rollout = SampledRollout.make(s.trajectory, s.integrator, s.t_final, s.log_every, s.plant.sensor or Sensor(2))
+    t, e, tau, _ = rollout.signals(loop, s.trajectory, z0)
+    np.testing.assert_allclose(t, reference.t, rtol=1e-15)
+    np.testing.assert_allclose(np.asarray(e), reference.e, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(tau), reference.tau, rtol=1e-9, atol=1e-9)
+
+
+def test_sampled_gradients_equal_central_differences_of_forward_runs():
+    scenario = load("example-6.3.1", SAMPLED)
+    gains = [locate(scenario, f) for f in ("controller.Kv", "controller.Lam", "controller.Gamma")]
+    goal = parse_objective("rms_error+1e-6*energy")
+    problem = Problem(scenario, gains, goal, None)
+    theta = problem.theta0
+    _, grad, objective, *_ = problem.evaluate(theta)
+    assert objective == pytest.approx(score(scenario, goal).objective, rel=1e-9)
+    h, fd = 1e-5, np.empty_like(theta)
+    for k in range(theta.size):
+        up, down = theta.copy(), theta.copy()
+        up[k] += h
+        down[k] -= h
+        fd[k] = (score(tuned_scenario(scenario, gains, up), goal).objective
+                 - score(tuned_scenario(scenario, gains, down), goal).objective) / (2 * h)
+    assert np.max(np.abs(grad - fd)) <= 1e-5 * np.max(np.abs(fd)), (grad, fd)
+
+
+def test_cli_tunes_a_sampled_data_scenario_and_refuses_mujoco(tmp_path, capsys):
+    out = tmp_path / "tune"
+    code = main(["tune", "example-6.3.1", "--t-final", "0.4", "--control-period", "0.004", "--vary", "controller.Kv",
+                 "--max-runs", "3", "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
+    summary = json.loads((out / "tune.json").read_text())
+    assert summary["objective"] > 0 and (out / "tuned.toml").exists()
+    pytest.importorskip("mujoco")
+    assert main(["tune", "example-6.3.1", "--t-final", "0.2", "--set", "plant.engine='mujoco'", "--vary",
+                 "controller.Kv", "--out", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "plant.engine: MuJoCo steps its plant" in err, err

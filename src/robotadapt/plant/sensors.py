@@ -65,8 +65,10 @@ class Sensor:
 
     def start(self, q0: Array, dq0: Array, Ts: float) -> State:
         """The measurement path's state before tick 0, from the initial state (module docstring)."""
-        dq0 = np.asarray(dq0, dtype=float)
-        return self.quantize(np.asarray(q0, dtype=float)) - Ts * dq0, dq0, np.zeros(self.n), np.asarray(True)
+        xp = array_namespace(q0, dq0)
+        if xp is np:
+            q0, dq0 = np.asarray(q0, dtype=float), np.asarray(dq0, dtype=float)
+        return self.quantize(q0) - Ts * dq0, dq0, xp.zeros(self.n), xp.asarray(True)
 
     def first_measurement(self, q0: Array, dq0: Array, Ts: float) -> tuple[Array, Array]:
         """(q_m, q̇_m) at tick 0 from the initial state: the run's first draws, as the run itself makes them (the draws

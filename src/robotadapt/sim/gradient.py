@@ -102,6 +102,67 @@ class Rollout:
         return t, ref.q_des - q, tau, z
 
 
+@dataclass(frozen=True, eq=False)
+class SampledRollout:
+    """The differentiable run of a sampled-data loop: the tick of :mod:`robotadapt.sim.sampled`
+    (`carry, record, verdict = tick(carry, inputs)`) under a fixed-length `lax.scan` over √N checkpointed blocks of
+    ticks, as :class:`Rollout` scans the RK4 step: ticks 0 … `n_ticks`, the last logged, not integrated; the inputs
+    (k, t_k, the reference, the sensor's noise drawn from its seed) laid out ahead as `(blocks, ticks per block, …)`."""
+
+    opts: Any  # the Sampled integrator
+    n_ticks: int
+    log_every: int
+    inputs: tuple[Array, Array, Reference, Array]
+
+    @classmethod
+    def make(cls, trajectory: Trajectory, opts: Any, t_final: float, log_every: int, sensor: Any) -> SampledRollout:
+        Ts = opts.control_period
+        n_ticks = int(np.ceil(t_final / Ts - 1e-9))
+        per_block = max(1, math.isqrt(n_ticks + 1))
+        blocks = -(-(n_ticks + 1) // per_block)
+        k = np.arange(blocks * per_block)
+        shape = (blocks, per_block)
+        ref = Reference(*(np.asarray(a).reshape(shape + a.shape[1:]) for a in trajectory(Ts * np.minimum(k, n_ticks))))
+        noise = sensor.noise(sensor.generator(), k.size).reshape(shape + (2, sensor.n))
+        return cls(opts, n_ticks, log_every, (k.reshape(shape), (Ts * k).reshape(shape), ref, noise))
+
+    @property
+    def times(self) -> Array:
+        return self.opts.control_period * np.arange(0, self.n_ticks + 1, self.log_every)
+
+    def signals(self, loop: ClosedLoop, trajectory: Trajectory, z0: Array) -> tuple[Array, Array, Array, Array]:
+        """(t, e, u, z) at the logged ticks: the error, the applied torque u_k the tick held and the state [s_k, x_k],
+        differentiable in everything the loop and `z0` hold."""
+        from ..plant.actuators import Actuator
+        from ..plant.sensors import Sensor
+        from .sampled import Carry, Tick
+
+        jax = jax_module()
+        jnp, lax, tree = jax.numpy, jax.lax, jax.tree_util
+        n, m, n_ticks = loop.n, loop.m, self.n_ticks
+        plant = loop.plant
+        tick = Tick(loop, self.opts, plant.sensor or Sensor(n), plant.actuator or Actuator(n), float("inf"), False)
+        z0 = jnp.asarray(z0)
+        s0 = z0[:m]
+        carry = Carry(s0, z0[m:], tick.sensor.start(s0[:n], s0[n : 2 * n], self.opts.control_period),
+                      tree.tree_map(jnp.asarray, tick.actuator.start()), jnp.zeros(0), jnp.zeros(0))
+
+        def one(carry: Carry, inputs: Any) -> tuple[Carry, tuple[Array, Array]]:
+            new, record, _ = tick(carry, inputs)
+            keep = inputs[0] < n_ticks
+            return tree.tree_map(lambda a, b: jnp.where(keep, a, b), new, carry), (record.z, record.tau)
+
+        @jax.checkpoint
+        def block(carry: Carry, inputs: Any) -> tuple[Carry, tuple[Array, Array]]:
+            return lax.scan(one, carry, inputs)
+
+        _, (z, u) = lax.scan(block, carry, self.inputs)
+        z, u = (a.reshape((-1,) + a.shape[2:])[: n_ticks + 1 : self.log_every] for a in (z, u))
+        t = self.times
+        ref = Reference(*(jnp.asarray(a) for a in trajectory(t)))
+        return t, ref.q_des - loop.split(z)[0], u, z
+
+
 def check_differentiable(loop: ClosedLoop) -> None:
     """A ConfigError (field `controller`) for a loop whose run jax.grad cannot go through: a model that JAX cannot
     trace (Pinocchio), a law with a delay line (its ring is written in place) or a switching term (sgn(r): its gradient

@@ -27,9 +27,11 @@ import numpy as np
 
 from ..analysis.metrics import OBJECTIVES, metrics, objective_terms
 from ..controllers.base import Prepares
+from ..plant.mujoco import MujocoPlant
+from ..plant.sensors import Sensor
 from ..sim.compiled import jax_module
-from ..sim.gradient import Rollout, check_differentiable, replace_at
-from ..sim.integrators import RK4
+from ..sim.gradient import Rollout, SampledRollout, check_differentiable, replace_at
+from ..sim.integrators import RK4, Sampled
 from ..sim.loop import ClosedLoop
 from ..validation import ConfigError
 from .gain_space import Gain, Objective, draw_over, locate, parse_objective, split, tuned_scenario
@@ -60,12 +62,16 @@ def closed_loop(scenario: Scenario) -> ClosedLoop:
     differentiate it: not the fixed-step RK4 in continuous time, or a law or model :func:`check_differentiable`
     refuses."""
     s = scenario.setup
-    if not isinstance(s.integrator, RK4):
-        raise ConfigError("simulation.method", "tuning differentiates the fixed-step RK4 in continuous time; use "
-                          "method = 'rk4' without control_period")
+    if not isinstance(s.integrator, RK4 | Sampled):
+        raise ConfigError("simulation.method", "tuning differentiates fixed steps (RK4, or the sampled-data ticks); "
+                          "use method = 'rk4'")
+    if isinstance(s.plant, MujocoPlant):
+        raise ConfigError("plant.engine", "MuJoCo steps its plant on the host, outside JAX: tune with plant.engine = "
+                          "'robotadapt', then check the gains on MuJoCo")
     ctrl = s.controller
+    h = s.integrator.control_period if isinstance(s.integrator, Sampled) else s.integrator.dt
     if isinstance(ctrl, Prepares):
-        ctrl = ctrl.prepare(s.trajectory, s.integrator.dt, s.t_final)
+        ctrl = ctrl.prepare(s.trajectory, h, s.t_final)
     loop = ClosedLoop(s.plant, ctrl, s.plant.model.n)
     check_differentiable(loop)
     return loop
@@ -81,8 +87,16 @@ class Problem:
         self.loop = closed_loop(scenario)
         ctrl = self.loop.controller
         self.gains, self.objective, self.max_torque = gains, objective, max_torque
-        self.rollout = Rollout.make(s.trajectory, s.integrator.dt, s.t_final, s.log_every)
-        self.x0 = ctrl.initial_state(s.q0, s.dq0)
+        self.rollout: Rollout | SampledRollout
+        if isinstance(s.integrator, Sampled):
+            self.rollout = SampledRollout.make(s.trajectory, s.integrator, s.t_final, s.log_every,
+                                               s.plant.sensor or Sensor(s.plant.model.n))
+            seen = (s.q0, s.dq0) if s.plant.sensor is None else s.plant.sensor.first_measurement(
+                s.q0, s.dq0, s.integrator.control_period)
+        else:
+            self.rollout = Rollout.make(s.trajectory, s.integrator.dt, s.t_final, s.log_every)
+            seen = (s.q0, s.dq0)
+        self.x0 = ctrl.initial_state(*seen)
         self.s0 = s.plant.initial_state(s.q0, s.dq0)
         self.trajectory, self.max_state = s.trajectory, s.max_state
         self.phis = s.plant.phi[None] if phis is None else np.asarray(phis, dtype=float)
