@@ -115,7 +115,8 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
     **per joint**: √(mean_k e_i(t_k)²), one entry per joint (rad or m); `rms_error_norm` the one scalar
     √(mean_k ‖e(t_k)‖²) = √(Σ_i rms_error_i²), what `robotadapt compare` tabulates as "RMS ‖e‖"; `ise` ∫‖e‖² dt;
     `final_error_norm` ‖e(t_final)‖; `max_abs_torque` max |τ| per joint; `control_energy` ∫ τᵀτ dt (the objectives of
-    `robotadapt tune` come from :func:`objective_terms`, the same code the tuner differentiates); `saturated_fraction`
+    `robotadapt tune` come from :func:`objective_terms`, the same code the tuner differentiates); `stop` (a run that
+    did not finish: its Status as a record, code, t, t_end, reason); `saturated_fraction`
     (:func:`saturated_fraction`, with an actuator) and `max_phi_hat_norm` max ‖φ̂‖ over the run; `final_phi_error`
     ‖φ − φ̂‖ at the end when the truth is known; `lyapunov_max_rel_increase` the largest step increase of V relative to
     V(0). With the controller's `model`, when its dynamics see fewer combinations than its parameters (an n-DOF arm),
@@ -124,7 +125,7 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
     e, t, tau = res.e, res.t, res.tau
     terms = {k: float(v) for k, v in objective_terms(t, e, tau).items()}
     out: dict[str, Any] = {
-        "status": res.status,
+        "status": str(res.status),
         "t_end": float(t[-1]),
         "n_samples": int(t.size),
         "final_abs_error": _list(np.abs(e[-1])),
@@ -141,6 +142,8 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
         "final_phi_hat": _list(res.phi_hat[-1]),
         "wall_time_s": res.wall_time,
     }
+    if res.status.code != "ok":  # the stop as a record: when (t, or the step from t to t_end) and why
+        out["stop"] = res.status.record()
     if "tau_commanded" in res.monitors:
         commanded = res.monitors["tau_commanded"]
         out["max_abs_commanded_torque"] = _list(np.max(np.abs(commanded), axis=0))

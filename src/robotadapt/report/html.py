@@ -231,7 +231,7 @@ def _pad(text: str, width: int, left: bool) -> str:
 def table_text(rows: list[Row]) -> str:
     """The comparison table as aligned text (what `robotadapt compare` prints), padded by display width."""
     cells = [[title for _, title, _ in COLUMNS]]
-    cells += [[_cell(r.metrics[k], fmt) if k != "status" else r.metrics[k].split(":")[0] for k, _, fmt in COLUMNS]
+    cells += [[_cell(r.metrics[k], fmt) if k != "status" else r.result.status.headline for k, _, fmt in COLUMNS]
               for r in rows]
     widths = [max(display_width(c[i]) for c in cells) for i in range(len(COLUMNS))]
     return "\n".join("  ".join(_pad(c, w, i == 0) for i, (c, w) in enumerate(zip(line, widths, strict=True)))

@@ -32,9 +32,10 @@ from ..plant.plant import Plant, SinusoidalDisturbance
 from ..trajectories import Reference, SumOfSines
 from ..validation import ConfigError, as_array, as_scalar, as_vector
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
-from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, Ring, Step, diverged, sample, step, stop_status, take, within
+from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, Ring, Step, diverged, sample, step, stop_status, take
 from .outputs import batch_outputs, outputs
 from .result import SimulationResult
+from .status import Status
 
 Array = Any
 T = TypeVar("T")
@@ -117,15 +118,16 @@ def stack(items: Sequence[T], name: str) -> T:
 
 @dataclass(frozen=True, eq=False)
 class BatchResult:
-    """The logged states of N runs on one time grid: `z[k, i]` = [s, x] of run i at `t[k]` (plant state s = [q, q̇,
-    …], controller state x), valid for `k < n_logged[i]` (a frozen run's record ends where it stopped). `status[i]` is
-    ``"ok"`` or ``"diverged at t=… s: reason"``, as for :func:`~robotadapt.sim.simulate`. `wall_time` is the
-    whole batch's; each run's metrics report its share, `wall_time / N`."""
+    """The logged states of N runs on one time grid: `z[k, i]` = [s, x] of run i at `t[k]` (plant state s = [q, q̇, …],
+    controller state x), valid for `k < n_logged[i]` (a frozen run's record ends where it stopped). `status[i]` is a
+    :class:`~robotadapt.sim.status.Status` (``"ok"`` or ``"diverged at t=… s: reason"``), as for
+    :func:`~robotadapt.sim.simulate`. `wall_time` is the whole batch's; each run's metrics report its share, `wall_time
+    / N`."""
 
     t: Array
     z: Array
     n_logged: Array
-    status: tuple[str, ...]
+    status: tuple[Status, ...]
     plants: tuple[Plant, ...]
     controllers: tuple[Any, ...]
     trajectories: tuple[Any, ...]
@@ -398,7 +400,7 @@ def _stopped(single: Callable[[int], ClosedLoop], alive: Array, t: float, z: Arr
 
 
 def _compiled(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any, z0: Array, dt: float, n_steps: int,
-              log_every: int, max_state: float, line: Ring | None) -> tuple[Array, Array, Array, list[str]]:
+              log_every: int, max_state: float, line: Ring | None) -> tuple[Array, Array, Array, list[Status]]:
     """:func:`_integrate` compiled by JAX (:mod:`robotadapt.sim.compiled`): the same samples and statuses."""
     from .compiled import integrate
 
@@ -411,7 +413,7 @@ def _compiled(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any, 
 
 def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any, z0: Array, dt: float, n_steps: int,
                log_every: int, max_state: float, progress: bool,
-               line: Ring | None) -> tuple[Array, Array, Array, list[str]]:
+               line: Ring | None) -> tuple[Array, Array, Array, list[Status]]:
     """Fixed-step RK4 of every run from t = 0; returns the logged (t, z), the number of valid samples per run and the
     statuses. The per-step math (:func:`~robotadapt.sim.loop.step`, `_advance`, `_stand_in`) writes into no array; the
     driver around it (logging, statuses, the run-by-run search when a law raises) is host code. A frozen run's log
@@ -422,14 +424,14 @@ def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any,
     n_log = n_steps // log_every + 1
     z_log = np.empty((n_log,) + z0.shape)
     n_logged = np.full(N, n_log)
-    status = ["ok"] * N
+    status = [Status.ok()] * N
     alive = np.ones(N, dtype=bool)
     z, k_log = z0, 0
     m_max = int(max(1, min(CHUNK, _REF_BYTES // (48 * N * z0.shape[1]))))
 
-    def stop(why: dict[int, str]) -> None:
-        for i, text in why.items():
-            status[i] = text
+    def stop(why: dict[int, Status]) -> None:
+        for i, end in why.items():
+            status[i] = end
         n_logged[list(why)] = k_log
         alive[list(why)] = False
 
@@ -459,12 +461,12 @@ def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any,
                 applied = z if s is None else s.applied
                 z_log[k_log], k_log = applied if left.all() else np.where(left[:, None], applied, z), k_log + 1
             if raised:
-                stop({i: f"diverged {within(t, dt)}: {why}" for i, why in raised.items()})
+                stop({i: Status.within(t, dt, why) for i, why in raised.items()})
             if s is None:
                 break
             z, now = _advance(loop, z, s.z, alive, max_state)
             if now.any():
-                stop({int(i): f"diverged at t={t + dt:.6g} s: {diverged(loop.guarded_part(s.z[i]), max_state)}"
+                stop({int(i): Status.at(t + dt, str(diverged(loop.guarded_part(s.z[i]), max_state)))
                       for i in np.flatnonzero(now)})
             line = s.line
             if not alive.any():

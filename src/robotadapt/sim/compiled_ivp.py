@@ -29,6 +29,7 @@ import numpy as np
 from ..controllers.base import HasDelayLine, HasGuard
 from ..validation import ConfigError
 from .compiled import jax_module, rebuild, skeleton
+from .status import Status
 
 if TYPE_CHECKING:
     from ..trajectories import Trajectory
@@ -104,7 +105,7 @@ def _program(loop: ClosedLoop, traj: Trajectory, opts: SolveIVP) -> tuple[Callab
 
 
 def integrate_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
-                  max_state: float) -> tuple[Array, Array, str]:
+                  max_state: float) -> tuple[Array, Array, Status]:
     """The logged times (every `opts.dt` up to t_final), states and status of an error-controlled run, compiled."""
     check_compilable(loop, opts.method)
     run, arrays = _program(loop, traj, opts)
@@ -121,8 +122,8 @@ def integrate_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP,
     keep = int(np.cumprod(done).sum())
     t, z = t_eval[:keep], z[:keep]
     if bool(stopped):
-        return t, z, f"diverged at t={float(t_end):.6g} s: state exceeded {max_state:g} in magnitude"
+        return t, z, Status.at(float(t_end), f"state exceeded {max_state:g} in magnitude")
     if int(code) != 0:
-        return t, z, (f"diverged at t={t[-1] if len(t) else 0.0:.6g} s: {opts.method} (diffrax "
-                      f"{METHODS[opts.method]}) failed: {_diffrax().RESULTS[int(code)]}")
-    return t, z, "ok"
+        return t, z, Status.at(t[-1] if len(t) else 0.0, f"{opts.method} (diffrax {METHODS[opts.method]}) failed: "
+                                 f"{_diffrax().RESULTS[int(code)]}")
+    return t, z, Status.ok()

@@ -50,7 +50,7 @@ class SampledTick(Protocol):
     def blank(self, carry: Any) -> Any:
         """A record of zeros shaped like the tick's (what a compiled block starts from)."""
 
-    def status(self, t: float, why: int, q_bad: Array, x_bad: Array) -> str:
+    def status(self, t: float, why: int, q_bad: Array, x_bad: Array) -> Any:
         """The run's status for a stop at `t` with reason code `why` (0: ok)."""
 
 
@@ -126,7 +126,7 @@ def _unseeded(tick: SampledTick) -> Any:
 
 
 def integrate_batch(ticks: Sequence[SampledTick], carries: list[Any], traj: Trajectory | list[Trajectory], n_ticks: int,
-                    log_every: int) -> tuple[Array, tuple[Array, ...], Array, list[str]]:
+                    log_every: int) -> tuple[Array, tuple[Array, ...], Array, list[Any]]:
     """N runs' ticks in one program, the single run's program mapped over a leading run axis (`jax.vmap`): the runs'
     ticks must have one skeleton (their float arrays, gains and true parameters, may differ), else a ConfigError
     naming `simulation`. `traj`: one trajectory for every run, or one per run. Returns the logged times, the records

@@ -20,6 +20,7 @@ from .._array import array_namespace, matvec
 from ..controllers.base import FiltersTorque, HasGuard, HasInstantEstimate, HasProjection, HasRegressor, NeedsAcceleration
 from ..plant.plant import Plant, same_model
 from ..trajectories import Reference
+from .status import Status
 
 Array = Any
 CHUNK = 2048  # steps whose reference is evaluated in one vectorized call
@@ -151,22 +152,16 @@ REASONS = {1: "non-finite state", 2: "state exceeded {max_state:g} in magnitude"
 GUARD = 3  # the reason code of a stop by the law's own guard (HasGuard): the text comes from the law
 
 
-def diverged_status(t: float, why: int, max_state: float) -> str:
+def diverged_status(t: float, why: int, max_state: float) -> Status:
     """The status of a run the compiled guard stopped at `t` for reason code `why` (a key of `REASONS`; 0: none)."""
-    return f"diverged at t={t:.6g} s: " + REASONS[why].format(max_state=max_state) if why else "ok"
+    return Status.at(t, REASONS[why].format(max_state=max_state)) if why else Status.ok()
 
 
-def within(t: float, dt: float) -> str:
-    """Where a run stopped that a law (or the plant) refused inside the step from t to t + dt, at one of its RK4
-    stages: the state at t was fine, the one it stopped at is the stage's (the reason names it)."""
-    return f"within the step from {t:.6g} to {t + dt:.6g} s"
-
-
-def stop_status(loop: ClosedLoop, t: float, why: int, max_state: float, z_bad: Array, dt: float) -> str:
+def stop_status(loop: ClosedLoop, t: float, why: int, max_state: float, z_bad: Array, dt: float) -> Status:
     """:func:`diverged_status`, and for `why` = GUARD the law's own reason, from the stage state `z_bad` it failed at
     inside the step from `t` to `t + dt`."""
     if why == GUARD:
-        return f"diverged {within(t, dt)}: {loop.stop_reason(z_bad)}"
+        return Status.within(t, dt, loop.stop_reason(z_bad))
     return diverged_status(t, why, max_state)
 
 

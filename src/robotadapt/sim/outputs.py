@@ -20,13 +20,14 @@ from ..validation import ConfigError
 from .compiled import compiled_map
 from .loop import ClosedLoop
 from .result import SimulationResult
+from .status import Status
 
 Array = Any
 COMPILED_OUTPUTS = 10**6  # logged states × parameters from which the maps are evaluated by JAX (a sweep's chunk, an
 # n-DOF arm's long run): numpy's per-call cost is then the larger, JAX's tracing the smaller
 
 
-def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status: str, wall: float,
+def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status: Status, wall: float,
             info: dict[str, Any], logged: dict[str, Array] | None = None) -> SimulationResult:
     """Recompute torque, V(t), r(t) and the passivity integral (6.4.4) from the pure maps at the logged instants.
 
@@ -45,7 +46,7 @@ def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status
 
 
 def batch_outputs(loop: ClosedLoop, controllers: tuple[Any, ...], trajectory: Trajectory, t: Array, z: Array,
-                  status: tuple[str, ...], wall: float, info: list[dict[str, Any]],
+                  status: tuple[Status, ...], wall: float, info: list[dict[str, Any]],
                   logged: dict[str, Array] | None = None) -> list[SimulationResult]:
     """:func:`outputs` of N runs logged together, `z` `(T, N, m)` (every run logged at every `t`), computed once
     for the batch by the merged `loop` (gains stacked over the runs) and `trajectory`: run i's record is its slice,
@@ -125,7 +126,7 @@ def _maps(loop: ClosedLoop, flags: tuple[bool], times: Array, z: Array, ref: Ref
 
 
 def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | None, extras: dict[str, Array],
-            status: str, wall: float, info: dict[str, Any]) -> SimulationResult:
+            status: Status, wall: float, info: dict[str, Any]) -> SimulationResult:
     phi_hat = signals["phi_hat"]
     assert phi_hat is not None
     caveat = getattr(ctrl, "passivity_caveat", None)  # a law whose passivity claim its gains may not imply

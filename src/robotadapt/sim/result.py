@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from .status import Status
+
 Array = np.ndarray
 
 
@@ -16,7 +18,8 @@ class SimulationResult:
     """Arrays are time-major: `q[k]` is the joint position at `t[k]`; `x` is the controller state, `phi_hat` the
     estimate it holds, `V` the controller's Lyapunov function (None where the theory defines none), `r` its filtered
     error. `phi` is the true parameter vector when the controller's model matches the plant's, else None.
-    `status` is ``"ok"`` or ``"diverged at t=… s: reason"``. `passivity` is the running integral ∫₀ᵗ −rᵀ Z φ̃ dσ of
+    `status` is a :class:`~robotadapt.sim.status.Status` record (code, t, reason) that reads ``"ok"`` or
+    ``"diverged at t=… s: reason"``. `passivity` is the running integral ∫₀ᵗ −rᵀ Z φ̃ dσ of
     (6.4.4) for controllers with a regressor, when the truth is known: carried in the integrated state (RK4 at every
     step; the sum over the ticks in sampled-data runs), read at the logged instants (docs/monitors.md).
     `monitors` holds signals that need the controller (robotadapt.sim.outputs.controller_series): V_φ(t), λ_min(P⁻¹(t))."""
@@ -35,7 +38,7 @@ class SimulationResult:
     phi: Array | None
     param_names: tuple[str, ...]
     state_names: tuple[str, ...]
-    status: str
+    status: Status
     wall_time: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
     passivity: Array | None = None

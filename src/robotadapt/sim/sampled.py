@@ -45,6 +45,7 @@ from ..plant.sensors import Sensor
 from ..trajectories import Reference
 from .compiled import jax_module
 from .loop import CHUNK, GUARD, ClosedLoop, diverged_status, ring_write, take
+from .status import Status
 
 if TYPE_CHECKING:
     from ..trajectories import Trajectory
@@ -273,10 +274,10 @@ class Tick:
 
         return repeat(array_namespace(s), self.opts.substeps, lambda i, s: rk4(f, t + i * h, s, h), s)
 
-    def status(self, t: float, why: int, q_bad: Array, x_bad: Array) -> str:
+    def status(self, t: float, why: int, q_bad: Array, x_bad: Array) -> Status:
         """The status of a run stopped at `t` for the code `why` (a guard: the law's reason at (q_bad, x_bad))."""
         if why == GUARD:
-            return f"diverged at t={t:.6g} s: {self.loop.controller.stop_reason(np.asarray(q_bad), np.asarray(x_bad))}"
+            return Status.at(t, str(self.loop.controller.stop_reason(np.asarray(q_bad), np.asarray(x_bad))))
         return diverged_status(t, why, self.max_state)
 
     def blank(self, carry: Carry) -> Record:
@@ -295,7 +296,7 @@ class Tick:
 
 def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory], z0: Array, opts: Sampled,
                     n_ticks: int, log_every: int, max_state: float, progress: bool, lines: list[Array] | None,
-                    backend: str = "numpy") -> tuple[Array, Array, Array, list[str], dict[str, Array]]:
+                    backend: str = "numpy") -> tuple[Array, Array, Array, list[Status], dict[str, Array]]:
     """N runs' ticks 0 … `n_ticks`: compiled together (`backend` "jax", :func:`compiled_sampled.integrate_batch`, one
     program mapped over the runs) or one by one by the numpy driver (the reference). `traj`: one trajectory for every
     run or one per run; `z0` `(N, d)`; `lines` each run's delay line contents (None: no line). Returns the logged
@@ -323,7 +324,7 @@ def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory]
 
 def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: int, log_every: int,
               max_state: float, progress: bool, line: DelayLine | None,
-              backend: str = "numpy") -> tuple[Array, Array, str, dict[str, Array]]:
+              backend: str = "numpy") -> tuple[Array, Array, Status, dict[str, Array]]:
     """Ticks 0 … `n_ticks` from t = 0, stepped by numpy (`backend` "numpy") or compiled by JAX ("jax"; the same tick,
     equal to round-off; `progress` is not shown); returns the logged (t, z), the status and the logged signals
     (:meth:`Tick.logged`). `line` gives the delay line's initial contents; it is not written. One run of
@@ -334,7 +335,7 @@ def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, n_ti
 
 
 def _run(tick: Tick, carry: Carry, traj: Trajectory, n_ticks: int, log_every: int,
-         progress: bool) -> tuple[Array, Record, str]:
+         progress: bool) -> tuple[Array, Record, Status]:
     """The numpy driver: the tick in a Python loop, the reference and the noise drawn a block of ticks at a time."""
     from tqdm import tqdm
 
@@ -343,7 +344,7 @@ def _run(tick: Tick, carry: Carry, traj: Trajectory, n_ticks: int, log_every: in
     n_log = n_ticks // log_every + 1
     logs = Record(*(np.empty((n_log, width)) for width in (carry.s.size + carry.x.size + carry.w.size,)
                     + (tick.loop.n,) * 4))
-    k_log, status, start = 0, "ok", 0
+    k_log, status, start = 0, Status.ok(), 0
     quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
     with tqdm(total=n_ticks + 1, delay=1.0, disable=quiet, unit="tick", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
@@ -364,7 +365,7 @@ def _run(tick: Tick, carry: Carry, traj: Trajectory, n_ticks: int, log_every: in
                         break
                     new, why, x_bad = tick.advance(mid, inputs, sample)
                 except SimulationStop as stop:  # a guarded law (or one that raises of its own) on numpy arrays
-                    status = f"diverged at t={t:.6g} s: {stop}"
+                    status = Status.at(t, str(stop))
                     break
                 if why:
                     status = tick.status(t if why == GUARD else t + Ts, int(why), sample.q_m, x_bad)

@@ -23,22 +23,23 @@ from ..plant.plant import Plant, same_model
 from ..trajectories import Trajectory
 from ..validation import ConfigError, as_scalar, as_vector
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
-from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, Ring, diverged, sample, step, stop_status, take, within
+from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, Ring, diverged, sample, step, stop_status, take
 from .outputs import outputs
 from .result import SimulationResult
+from .status import Status
 
 Array = Any
 
 
 def _rk4(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int, max_state: float,
-         progress: bool, line: Ring | None) -> tuple[Array, Array, str]:
+         progress: bool, line: Ring | None) -> tuple[Array, Array, Status]:
     """Fixed-step RK4 from t = 0 (:func:`~robotadapt.sim.loop.step` in a Python loop); returns logged (t, z) and the
     status. The log at t_k holds the state applied over step k (with a delay line, x as read from it); the last sample,
     at t_final, is logged, not integrated."""
     from tqdm import tqdm
 
     z_log = np.empty((n_steps // log_every + 1,) + z0.shape)
-    z, k_log, status = z0, 0, "ok"
+    z, k_log, status = z0, 0, Status.ok()
     quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
     with tqdm(total=n_steps, delay=1.0, disable=quiet, unit="step", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
@@ -50,14 +51,14 @@ def _rk4(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int,
                 try:
                     s = step(loop, k, t, z, line, dt, take(ref, 2 * j), take(ref, 2 * j + 1), take(ref, 2 * j + 2))
                 except SimulationStop as stop:  # the law's assumptions failed (a guarded law, on numpy)
-                    status, s = f"diverged {within(t, dt)}: {stop}", None
+                    status, s = Status.within(t, dt, str(stop)), None
                 if k % log_every == 0:
                     z_log[k_log], k_log = z if s is None else s.applied, k_log + 1
                 if s is None:
                     break
                 reason = diverged(loop.guarded_part(s.z), max_state)
                 if reason is not None:
-                    status = f"diverged at t={t + dt:.6g} s: {reason}"
+                    status = Status.at(t + dt, reason)
                     break
                 z, line = s.z, s.line
             bar.update(m)
@@ -71,7 +72,7 @@ def _rk4(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int,
 
 
 def _rk4_compiled(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int,
-                  max_state: float, line: Ring | None) -> tuple[Array, Array, str]:
+                  max_state: float, line: Ring | None) -> tuple[Array, Array, Status]:
     """:func:`_rk4` compiled by JAX: the same logged samples and status."""
     from .compiled import integrate
 
@@ -80,7 +81,7 @@ def _rk4_compiled(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_st
 
 
 def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
-               max_state: float) -> tuple[Array, Array, str]:
+               max_state: float) -> tuple[Array, Array, Status]:
     from scipy.integrate import solve_ivp
 
     def fun(t: float, y: Array) -> Array:
@@ -97,15 +98,16 @@ def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_
             sol = solve_ivp(fun, (0.0, t_eval[-1]), z0, method=opts.method, t_eval=t_eval, rtol=opts.rtol,
                             atol=opts.atol, events=runaway)
     except SimulationStop as stop:  # solve_ivp keeps nothing: rerun to just before the stop is not worth it
-        return t_eval[:1], z0[None, :], f"diverged at t=0 s or later: {stop} (use method = 'rk4' to keep the partial run)"
+        why = f"{stop} (solve_ivp keeps nothing of the run: use method = 'rk4' to keep the partial run)"
+        return t_eval[:1], z0[None, :], Status.between(0.0, float(t_eval[-1]), why)
     t, z = sol.t, sol.y.T
     finite = np.all(np.isfinite(z), axis=1)
     t, z = t[np.cumprod(finite).astype(bool)], z[np.cumprod(finite).astype(bool)]
     if sol.status == 1:
-        return t, z, f"diverged at t={sol.t_events[0][0]:.6g} s: state exceeded {max_state:g} in magnitude"
+        return t, z, Status.at(sol.t_events[0][0], f"state exceeded {max_state:g} in magnitude")
     if sol.status == -1:
-        return t, z, f"diverged at t={t[-1] if len(t) else 0.0:.6g} s: {opts.method} failed: {sol.message}"
-    return t, z, "ok"
+        return t, z, Status.at(t[-1] if len(t) else 0.0, f"{opts.method} failed: {sol.message}")
+    return t, z, Status.ok()
 
 
 def mujoco_sampling(plant: MujocoPlant, integrator: RK4 | SolveIVP | Sampled) -> Sampled:
@@ -218,7 +220,7 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
                               f"use a larger {name.split('.')[1]} or simulation.log_every")
         backend = choose_backend(integrator.backend, n_steps, plant.model.traceable and controller.model.traceable)
 
-        def run(backend: str) -> tuple[Array, Array, str, dict[str, Array] | None]:
+        def run(backend: str) -> tuple[Array, Array, Status, dict[str, Array] | None]:
             if isinstance(integrator, Sampled):
                 from .sampled import integrate
 

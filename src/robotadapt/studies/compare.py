@@ -77,13 +77,15 @@ LINEUP: dict[str, Contender] = {
 
 
 def number_text(v: Any) -> str:
-    """A number or list of numbers to 4 significant digits, text as is, None as —."""
+    """A number or list of numbers to 4 significant digits, text as is, None as —, a record as its fields."""
     if v is None:
         return "—"
     if isinstance(v, bool | str):
         return str(v)
     if isinstance(v, list | tuple):
         return "[" + ", ".join(number_text(x) for x in v) + "]"
+    if isinstance(v, dict):  # a record (a run's stop, its plant's effects)
+        return ", ".join(f"{k} = {number_text(x)}" for k, x in v.items())
     return f"{v:.4g}"
 
 
