@@ -3,7 +3,8 @@
 Every row is a ratio to the plain Python RK4 loop of Example 6.3.1 (10 s at 1 kHz, written out in bench_single_run.py)
 timed in this same run:
 
-* one run in this process: solve_ivp RK45 by hand, robotadapt's numpy path, robotadapt's compiled path (steady state);
+* one run in this process: solve_ivp RK45 by hand, robotadapt's numpy path, robotadapt's compiled path (steady
+  state) as a user runs it (`simulate`'s default `log_every=1`, every step logged) and logging every 1000th step;
 * one run end to end in a fresh process, `robotadapt run example-6.3.1` (import, trace, compile or load from the disk
   cache, run, result.npz, metrics.json and the three figures), with an empty compilation cache (cold) and with the cache
   the first process left (warm); the plain loop's reference is its own time;
@@ -25,10 +26,21 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench_single_run import naive_rk4, naive_solve_ivp, robotadapt_simulate, timed
+import numpy as np
+from bench_single_run import ARM, CTRL, DT, PHI, T_FINAL, naive_rk4, naive_solve_ivp, robotadapt_simulate, timed
+
+from robotadapt.plant import Plant
+from robotadapt.sim import RK4, simulate
+from robotadapt.trajectories import sinusoid
 
 HERE = Path(__file__).resolve().parent
 CLI = [sys.executable, "-m", "robotadapt"]
+
+
+def compiled_run(log_every: int) -> np.ndarray:
+    """Example 6.3.1 on the compiled path, logging every `log_every`-th step (1: `simulate`'s default)."""
+    res = simulate(Plant(ARM, PHI), CTRL, sinusoid(2), t_final=T_FINAL, integrator=RK4(DT, "jax"), log_every=log_every)
+    return np.concatenate([res.q[-1], res.dq[-1], res.x[-1]])
 
 
 def fresh(args: list[str], cache: str) -> float:
@@ -64,8 +76,10 @@ def main() -> None:
     rows = [("plain Python RK4 loop (the baseline)", t_loop, 1)]
     rows.append(("numpy + solve_ivp RK45, by hand", timed(naive_solve_ivp, 3)[0], 1))
     rows.append(("robotadapt, numpy path", timed(lambda: robotadapt_simulate("numpy"), 1)[0], 1))
-    robotadapt_simulate("jax")
-    rows.append(("robotadapt, compiled path (steady)", timed(lambda: robotadapt_simulate("jax"), 5)[0], 1))
+    for log_every, what in ((1, "log_every=1 (default)"), (1000, "log_every=1000")):
+        compiled_run(log_every)  # trace and compile: not the steady state
+        seconds = timed(lambda every=log_every: compiled_run(every), 5)[0]
+        rows.append((f"robotadapt, compiled, steady, {what}", seconds, 1))
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
         derived = Path(os.environ.get("ROBOTADAPT_CACHE", Path.home() / ".cache" / "robotadapt")) / "dh"
         if derived.is_dir():  # the PUMA's sympy derivation is not what is timed: only the JAX cache starts empty

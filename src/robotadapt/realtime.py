@@ -13,17 +13,22 @@ controller's state (x, the measurement memory, the delay line) lives inside the 
 Backends: "jax" compiles the tick once (`jax.jit(...).lower(...).compile()`, cached on disk under
 $ROBOTADAPT_CACHE/jax) on one vector each way (:func:`packed`): the state raveled into one device buffer, donated to
 the call that replaces it, and [k, t, q, q̇] written into one preallocated input buffer; a step allocates no new state
-and runs no Python of the law. "numpy" calls the law itself (a Pinocchio model, whose C++ JAX cannot trace, takes
-it). "auto" takes "jax" where the model is traceable: measured 6–8 times faster at p50 (docs/realtime.md,
-benchmarks/bench_realtime.py). A guarded law's guard (adaptive computed torque's M̂ ≻ 0) raises on the numpy backend
-and is not read on the compiled one.
+and runs no Python of the law. The compiled step runs synchronously, on a CPU client of its own
+(:func:`sync_cpu_device`): JAX's CPU client dispatches asynchronously by default, which costs a real-time step its
+latency (the Panda's step measured p50 54 → 29 µs, p99 217 → 67 µs, max 4189 → 226 µs without it), and
+`jax_cpu_enable_async_dispatch` cannot be scoped: JAX reads it once, when it creates its CPU client, so
+`jax.config.update` afterwards changes nothing, and it has no context manager. The private client leaves that setting,
+and JAX's own client that the rest of a program uses, as they were. "numpy" calls the law itself (a Pinocchio model,
+whose C++ JAX cannot trace, takes it). "auto" takes "jax" where the model is traceable: measured 5–17 times faster at
+p50 (docs/realtime.md, benchmarks/bench_realtime.py). A guarded law's guard (adaptive computed torque's M̂ ≻ 0)
+raises on the numpy backend and is not read on the compiled one.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import partial
+from functools import cache, partial
 from typing import Any
 
 import numpy as np
@@ -127,6 +132,7 @@ class RealtimeController:
         from jax.flatten_util import ravel_pytree
 
         flat, unravel = ravel_pytree(jax.tree_util.tree_map(jax.numpy.asarray, carry))
+        flat = jax.device_put(flat, sync_cpu_device())  # the program runs where its arguments are
         if self._step is None:
             program = jax.jit(partial(packed, self.loop_tick, self.trajectory, ravel_pytree, unravel),
                               donate_argnums=(0,))
@@ -149,6 +155,17 @@ class RealtimeController:
         if self._unravel is None:
             return np.zeros(0)
         return np.array(self._unravel(self._state).x)
+
+
+@cache
+def sync_cpu_device() -> Any:
+    """The CPU device of a PJRT CPU client made for real-time steps, with asynchronous dispatch off (one per process):
+    a program whose arguments live on it runs inline in the calling thread and returns ready results. JAX's own client
+    keeps the process's `jax_cpu_enable_async_dispatch`, which JAX reads only when it creates that client."""
+    from jax._src.lib import xla_client
+
+    client: Any = xla_client.make_cpu_client(asynchronous=False)
+    return client.devices()[0]
 
 
 def _same(carry: Any) -> Any:
