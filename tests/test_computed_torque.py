@@ -408,7 +408,7 @@ def test_both_lyapunov_pairs_converge_over_20_s(name, overrides):
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 5])
-def test_positive_definite_is_the_cholesky_test_matrix_by_matrix(n):
+def test_positive_definite_is_the_cholesky_test_matrix_by_matrix(x64, n):
     """The closed forms (n ≤ 2) and the stacked Cholesky agree with numpy's Cholesky, one matrix at a time, on
     definite, semidefinite, indefinite and non-finite matrices (not definite); JAX gives the same answers."""
     from robotadapt.controllers.base import positive_definite
@@ -433,11 +433,11 @@ def test_positive_definite_is_the_cholesky_test_matrix_by_matrix(n):
     jnp = pytest.importorskip("jax").numpy
     from robotadapt.sim.compiled import jax_module
 
-    jax_module()  # float64
+    jax_module()
     np.testing.assert_array_equal(np.asarray(positive_definite(jnp, jnp.asarray(S))), want)
 
 
-def test_on_traced_arrays_the_update_returns_nan_where_the_guard_fails():
+def test_on_traced_arrays_the_update_returns_nan_where_the_guard_fails(x64):
     """The same law on JAX arrays: no exception (tracing cannot raise), NaN for the run whose M̂ is indefinite, the
     numpy values for the others, and `guard` says which; on numpy arrays the same call raises SimulationStop."""
     pytest.importorskip("jax")

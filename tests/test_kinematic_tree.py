@@ -13,9 +13,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import os
 import pickle
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -304,12 +302,11 @@ def test_batch_axes_broadcast_and_match_single_states():
 
 
 def _jax():
-    jax = pytest.importorskip("jax")
-    jax.config.update("jax_enable_x64", True)
-    cache = os.environ.get("ROBOTADAPT_CACHE")
-    if cache:
-        jax.config.update("jax_compilation_cache_dir", str(Path(cache) / "jax"))
-    return jax
+    """JAX with the project's disk cache (float64 comes from the `x64` fixture)."""
+    pytest.importorskip("jax")
+    from robotadapt.sim.compiled import jax_module
+
+    return jax_module()
 
 
 def every_term(tree: KinematicTree, q, dq, v, a, phi) -> dict[str, object]:
@@ -320,7 +317,7 @@ def every_term(tree: KinematicTree, q, dq, v, a, phi) -> dict[str, object]:
 
 
 @pytest.mark.parametrize("batch", [(), (10,)])
-def test_jax_jit_equals_numpy(batch):
+def test_jax_jit_equals_numpy(x64, batch):
     """The same code traced: one jit'ed program of every term, one state (multiply-and-sum products) and 10 states
     (10 × 7 links: matmul products), to 1e-12."""
     jax = _jax()
@@ -333,7 +330,7 @@ def test_jax_jit_equals_numpy(batch):
         close(np.asarray(compiled[key]), value, 1e-12)
 
 
-def test_jax_vmap_and_the_tree_path():
+def test_jax_vmap_and_the_tree_path(x64):
     """vmap over states equals the numpy batch; the branched-tree path (0/1 ancestry products) traces too."""
     jax = _jax()
     tree, _ = example("ur5")

@@ -181,7 +181,7 @@ def _effect_steps(actuator: Actuator, sensor: Sensor, q: np.ndarray, dq: np.ndar
     return tuple(xp.stack([o[i] for o in out]) for i in range(4))
 
 
-def test_the_actuator_and_the_sensor_are_pure_and_trace_under_jax():
+def test_the_actuator_and_the_sensor_are_pure_and_trace_under_jax(x64):
     """State in, state out: the inputs are never written, and jax.jit of the same calls gives the same numbers."""
     actuator = Actuator(2, torque_limit=[50.0, 20.0], torque_rate_limit=3e4, delay_samples=2)
     sensor = Sensor(2, encoder_resolution=1e-3, velocity="filter", velocity_cutoff=30.0, noise_q=1e-4, noise_dq=1e-3)

@@ -22,7 +22,7 @@ def panda() -> RealtimeController:
     return ctrl
 
 
-def test_the_compiled_step_returns_ready_results() -> None:
+def test_the_compiled_step_returns_ready_results(x64: None) -> None:
     """Every output of the step's program is computed when the call returns (asynchronously, 198 of 200 were not)."""
     ctrl = panda()
     ref = ctrl.trajectory(ctrl.Ts * np.arange(50))

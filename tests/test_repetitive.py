@@ -231,7 +231,7 @@ def test_bad_settings_name_the_field(over):
 # The delay line in the carried state (issue 14): a pure update, the same on numpy and JAX
 
 
-def test_the_delay_line_is_read_at_slot_k_mod_N_and_written_without_touching_the_old_line():
+def test_the_delay_line_is_read_at_slot_k_mod_N_and_written_without_touching_the_old_line(x64):
     """`sample` at step k hands the law slot k mod N (the line's head, a copy), stores û_d(t_k) there in a new array,
     reads slot k + 1 mod N for the next step from that new array, and leaves the line it was given as it was: the one
     step function's update, numpy or traced."""
@@ -268,7 +268,7 @@ def test_the_delay_line_is_read_at_slot_k_mod_N_and_written_without_touching_the
     np.testing.assert_array_equal(slots, before)
 
 
-def test_the_saturated_law_clips_on_jax_arrays_too():
+def test_the_saturated_law_clips_on_jax_arrays_too(x64):
     jnp = pytest.importorskip("jax").numpy
     ctrl = Repetitive(ARM, Kv=50, Kp=50, Ka=50, kL=20, period=T, u_min=-5, u_max=5)
     ref = sinusoid(2)(0.3)

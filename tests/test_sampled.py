@@ -471,7 +471,7 @@ def test_sampled_loops_of_one_shape_share_a_program_and_keep_their_own_gains(mon
     assert not np.allclose(finals[0], finals[1]) and programs[1] == programs[0]
 
 
-def test_the_delay_line_is_written_into_a_new_array():
+def test_the_delay_line_is_written_into_a_new_array(x64):
     from robotadapt.sim.sampled import ring_write
 
     line = np.arange(8.0).reshape(4, 2)

@@ -330,10 +330,9 @@ def test_batch_contract():
             np.testing.assert_allclose(batched[i, j], one(i, j), rtol=1e-13, atol=1e-13)
 
 
-def test_other_array_namespaces():
+def test_other_array_namespaces(x64):
     """The same generated code runs on jax.numpy arrays (stacking, no assignment) and agrees with numpy."""
     jax = pytest.importorskip("jax")
-    jax.config.update("jax_enable_x64", True)
     model = arm("modified-rpr")
     q, dq, v, a = np.random.default_rng(5).normal(size=(4, 2, model.n))
     J = [jax.numpy.asarray(x) for x in (q, dq, v, a)]

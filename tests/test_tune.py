@@ -82,7 +82,7 @@ def test_objectives_are_the_hand_written_sums():
     assert score(scenario, parse_objective("rms_error")).objective == pytest.approx(np.sqrt(np.mean(e2)), rel=1e-12)
 
 
-def test_gains_stay_positive_definite_and_round_trip():
+def test_gains_stay_positive_definite_and_round_trip(x64):
     scenario, gains = law("slotine_li")
     kv = gains[0]
     assert kv.form == "matrix" and gains[1].form == "diagonal" and gains[2].form == "scalar"

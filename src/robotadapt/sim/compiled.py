@@ -2,8 +2,10 @@
 
 Nothing here is a second copy of a model or a controller: the step is :func:`robotadapt.sim.loop.step` on the same
 `ClosedLoop`, whose models and controllers are written against the array API (`xp = array_namespace(...)`); traced
-with JAX arrays they build one XLA program. float64 is switched on, so a run equals the numpy backend's to round-off
-(1e-9 is what the tests ask). The reference is sampled by numpy ahead of each chunk of steps and fed to the scan.
+with JAX arrays they build one XLA program. float64 is on for the project's programs only (:func:`float64`, a
+thread-local scope around each entry point: the user's `jax_enable_x64` stays as it was), so a run equals the numpy
+backend's to round-off (1e-9 is what the tests ask). The reference is sampled by numpy ahead of each chunk of steps
+and fed to the scan.
 
 The scan carries (z, line, k) and the guards' flags (:class:`Carry`): the state, the delay line of a law with one (the
 repetitive law; written by :func:`robotadapt.sim.loop.ring_write`, in place inside the program) and the step index.
@@ -13,7 +15,8 @@ the step and with the status the numpy run gives (the law's message, from the RK
 
 The state may carry leading run axes (`(..., m)`, :func:`robotadapt.sim.batch.simulate_batch`): each run has its own
 guards and is frozen at its last good state, as in the numpy batch. Compiled programs are cached on disk
-(`$ROBOTADAPT_CACHE/jax`, default `~/.cache/robotadapt/jax`), so a second process does not pay the compilation again.
+(`$ROBOTADAPT_CACHE/jax`, default `~/.cache/robotadapt/jax`), so a second process does not pay the compilation again;
+the cache directory is set only where the user has set none (JAX has one per process).
 The same code runs on a GPU where `jax[cuda]` is installed (JAX picks the device; nothing here needs one).
 
 What cannot be traced (a law or model whose code needs concrete values: a Pinocchio arm, a host-side check) is refused
@@ -26,9 +29,9 @@ import copy
 import os
 from collections.abc import Callable, Iterator
 from dataclasses import is_dataclass
-from functools import cache, partial
+from functools import cache, partial, wraps
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, TypeVar
 
 import numpy as np
 
@@ -40,22 +43,35 @@ if TYPE_CHECKING:
     from .loop import ClosedLoop
 
 Array = Any
+F = TypeVar("F", bound=Callable[..., Any])
 CHUNK_STEPS = 16384  # most steps per compiled call (the last call is padded)
 REF_BYTES = 64e6  # most bytes of reference samples fed to one call (all runs together)
 
 
 @cache
 def jax_module() -> Any:
-    """JAX with float64 on and the persistent compilation cache set up; a ConfigError when it is not installed."""
+    """JAX, with the persistent compilation cache set up where the user has set none; a ConfigError when it is not
+    installed. float64 is not switched on here: :func:`float64` scopes it."""
     try:
         import jax
     except ImportError:
         raise ConfigError("simulation.backend", "the 'jax' backend needs JAX: pip install 'robotadapt[jax]'") from None
-    jax.config.update("jax_enable_x64", True)
-    root = Path(os.environ.get("ROBOTADAPT_CACHE", Path.home() / ".cache" / "robotadapt"))
-    jax.config.update("jax_compilation_cache_dir", str(root / "jax"))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    if jax.config.jax_compilation_cache_dir is None:  # type: ignore[attr-defined]
+        root = Path(os.environ.get("ROBOTADAPT_CACHE", Path.home() / ".cache" / "robotadapt"))
+        jax.config.update("jax_compilation_cache_dir", str(root / "jax"))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     return jax
+
+
+def float64(fn: F) -> F:
+    """`fn` run with JAX's float64 on for the calling thread, within the call only (`jax.enable_x64`): the project's
+    programs are traced and called in float64, and the user's `jax_enable_x64` is as it was afterwards."""
+    @wraps(fn)
+    def scoped(*args: Any, **kwargs: Any) -> Any:
+        with jax_module().enable_x64(True):
+            return fn(*args, **kwargs)
+
+    return scoped  # type: ignore[return-value]
 
 
 def skeleton(obj: Any, leaves: list[Array]) -> Any:
@@ -108,6 +124,7 @@ def rebuild(obj: Any, leaves: Iterator[Array]) -> Any:
 _MAPS: dict[Any, Callable[..., Any]] = {}
 
 
+@float64
 def compiled_map(fn: Callable[..., Any], obj: Any, static: Any, *args: Any) -> Any:
     """`fn(obj, static, *args)` evaluated by JAX, numpy arrays out: `obj` (a closed loop) with its float arrays passed as
     arguments (:func:`skeleton`), so objects of one shape share one program; `static` (hashable) is part of the
@@ -310,6 +327,7 @@ def _program(loop: ClosedLoop, dt: float, max_state: float) -> tuple[Callable[..
     return run, leaves
 
 
+@float64
 def integrate(loop: ClosedLoop, reference: Callable[[Array], Reference], z0: Array, dt: float, n_steps: int,
               log_every: int, max_state: float,
               line: Ring | None = None) -> tuple[Array, Array, Array, Array, Array, Array]:

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..controllers.base import HasDelayLine, HasGuard
 from ..validation import ConfigError
-from .compiled import jax_module, rebuild, skeleton
+from .compiled import float64, jax_module, rebuild, skeleton
 from .status import Status
 
 if TYPE_CHECKING:
@@ -104,6 +104,7 @@ def _program(loop: ClosedLoop, traj: Trajectory, opts: SolveIVP) -> tuple[Callab
     return run, leaves
 
 
+@float64
 def integrate_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
                   max_state: float) -> tuple[Array, Array, Status]:
     """The logged times (every `opts.dt` up to t_final), states and status of an error-controlled run, compiled."""

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..trajectories import Reference, Trajectory
 from ..validation import ConfigError
-from .compiled import CHUNK_STEPS, REF_BYTES, jax_module, rebuild, skeleton
+from .compiled import CHUNK_STEPS, REF_BYTES, float64, jax_module, rebuild, skeleton
 from .loop import GUARD
 
 Array = Any
@@ -125,6 +125,7 @@ def _unseeded(tick: SampledTick) -> Any:
     return replace(tick, loop=loop, sensor=replace(tick.sensor, seed=0))  # type: ignore[type-var]
 
 
+@float64
 def integrate_batch(ticks: Sequence[SampledTick], carries: list[Any], traj: Trajectory | list[Trajectory], n_ticks: int,
                     log_every: int) -> tuple[Array, tuple[Array, ...], Array, list[Any]]:
     """N runs' ticks in one program, the single run's program mapped over a leading run axis (`jax.vmap`): the runs'

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..trajectories import Reference, Trajectory
 from ..validation import ConfigError
-from .compiled import jax_module
+from .compiled import float64, jax_module
 from .loop import ClosedLoop, step
 
 Array = Any
@@ -91,6 +91,7 @@ class Rollout:
         z_all = jnp.concatenate([z_all.reshape((-1,) + z_all.shape[2:])[:n_steps], z_end[None]])
         return z_all[:: self.log_every]
 
+    @float64
     def signals(self, loop: ClosedLoop, trajectory: Trajectory, z0: Array) -> tuple[Array, Array, Array, Array]:
         """(t, e, τ, z) at the logged instants: the tracking error e = q_d − q and the torque the plant receives,
         recomputed from the logged states by the pure maps as :func:`robotadapt.sim.outputs.outputs` does."""
@@ -130,6 +131,7 @@ class SampledRollout:
     def times(self) -> Array:
         return self.opts.control_period * np.arange(0, self.n_ticks + 1, self.log_every)
 
+    @float64
     def signals(self, loop: ClosedLoop, trajectory: Trajectory, z0: Array) -> tuple[Array, Array, Array, Array]:
         """(t, e, u, z) at the logged ticks: the error, the applied torque u_k the tick held and the state [s_k, x_k],
         differentiable in everything the loop and `z0` hold."""

@@ -29,7 +29,7 @@ from ..analysis.metrics import OBJECTIVES, metrics, objective_terms
 from ..controllers.base import Prepares
 from ..plant.mujoco import MujocoPlant
 from ..plant.sensors import Sensor
-from ..sim.compiled import jax_module
+from ..sim.compiled import float64, jax_module
 from ..sim.gradient import Rollout, SampledRollout, check_differentiable, replace_at
 from ..sim.integrators import RK4, Sampled
 from ..sim.loop import ClosedLoop
@@ -131,6 +131,7 @@ class Problem:
         penalty = (jnp.maximum(0.0, mu + rho * g) ** 2 - mu**2) / (2.0 * rho) if self.max_torque else 0.0 * g
         return objective / scale + penalty, (objective, jnp.max(values["max_abs_torque"]), g, jnp.all(ok))
 
+    @float64
     def objectives(self, thetas: Array) -> tuple[Array, Array]:
         """The objective (mean over the true-parameter sets) and the exact peak torque at each row of `thetas`
         `(k, size)`, forward only (vmapped); NaN where a run diverged."""
@@ -147,6 +148,7 @@ class Problem:
         objective, peak = self._forward(np.asarray(thetas, dtype=float))
         return np.asarray(objective), np.asarray(peak)
 
+    @float64
     def evaluate(self, theta: Array, mu: float = 0.0, rho: float = 1.0) -> tuple[float, Array, float, float, float,
                                                                                      bool]:
         """(scaled augmented objective, its gradient, objective, exact peak torque, smooth constraint g, finite)."""
