@@ -317,8 +317,13 @@ def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, m
     """:func:`simulate_batch` of sampled-data runs: the runs' ticks compiled into one program mapped over the runs
     (:func:`robotadapt.sim.sampled.integrate_batch`), or stepped one by one by numpy; the runs must share one
     program's shape (they differ in arrays: gains, tables, true parameters), else NotBatchable."""
+    from ..plant.mujoco import MujocoPlant
     from .sampled import integrate_batch
+    from .simulation import mujoco_sampling
 
+    for plant in runs.plants:  # MuJoCo steps its plant on the host: numpy ("auto"), or the single run's refusal
+        if isinstance(plant, MujocoPlant):
+            opts = mujoco_sampling(plant, opts)
     Ts, (N, n) = opts.control_period, runs.q0.shape
     n_ticks = int(np.ceil(t_final / Ts - 1e-9))
     log_bytes = 8.0 * (n_ticks // log_every + 1) * N * (runs.s0.shape[1] + runs.x0.shape[1] + 2 + 4 * n)
