@@ -335,3 +335,17 @@ def test_plain_law_lyapunov_increases_only_by_the_held_delay_and_less_with_a_sma
     coarse_rise, fine_rise = np.diff(V).clip(0), np.diff(finer.V).clip(0)
     assert fine_rise.max() < 0.3 * coarse_rise.max() and coarse_rise.max() < 1e-4 * V[0]
     assert fine_rise.sum() < 0.2 * coarse_rise.sum()
+
+
+def test_the_divergence_guard_skips_the_monitors_window_integrals_in_sampled_time():
+    """V's window integrals (w, c) are records for the monitor, not the loop's state: a sampled run (q_d = sin 10t,
+    Ts = T/400) whose records pass max_state = 650 while q, q̇ and û_d stay below it runs to the end, as the
+    continuous guard (ClosedLoop.guarded_part) lets it."""
+    from robotadapt.sim import Sampled, simulate
+
+    s = load("example-7.2.2", ["trajectory.omega=10.0", "controller.period=0.6283185307179586"]).setup
+    res = simulate(s.plant, s.controller, s.trajectory, t_final=0.7, max_state=650.0,
+                   integrator=Sampled(0.6283185307179586 / 400, backend="numpy"))
+    assert res.ok, res.status
+    assert np.abs(res.x[:, 2:]).max() > 650.0  # the records went past the bound
+    assert np.abs(np.concatenate([res.q, res.dq, res.x[:, :2]], axis=1)).max() < 650.0

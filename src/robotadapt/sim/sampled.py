@@ -216,7 +216,7 @@ class Tick:
         x, ok, x_bad = self.next_state(t, ref, carry.x, sample)
         s = self.hold(t, carry.s, sample.u)
         xp = array_namespace(s, x)
-        z = xp.concatenate([s, x])
+        z = self.loop.guarded_part(xp.concatenate([s, x, carry.w]))  # as the continuous guard: no monitor records
         why = xp.where(xp.all(xp.isfinite(z)), xp.where(xp.max(xp.abs(z)) > self.max_state, 2, 0), 1)
         if ok is not None:
             why = xp.where(ok, why, GUARD)
