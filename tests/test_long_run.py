@@ -22,7 +22,7 @@ def test_memory_does_not_grow_with_the_number_of_steps(monkeypatch):
     """Three times the steps with the same number of logged samples: the same peak memory (within 20 %). Both runs span
     more than two chunks of the vectorized reference (made small here: tracemalloc slows every allocation), so the
     chunk buffer is the same size in both; a warm-up run first keeps one-time allocations (imports, caches) out."""
-    monkeypatch.setattr("robotadapt.sim.simulation.CHUNK", 64)
+    monkeypatch.setattr("robotadapt.sim.driver.CHUNK", 64)
     _peak_bytes(200, 2)
     short, _ = _peak_bytes(500, 5)
     long, res = _peak_bytes(1_500, 15)

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from robotadapt._array import rk4
 from robotadapt.plant.mujoco import load_mujoco
 from robotadapt.realtime import RealtimeController
-from robotadapt.sim.sampled import rk4
 from robotadapt.studies.scenarios import load
 from robotadapt.validation import ConfigError
 

@@ -297,7 +297,7 @@ def test_digital_6_3_1_study_fails_between_10_and_15_ms():
             assert run.result.status.startswith("diverged at t="), run.value
 
 
-# -- the compiled loop (robotadapt.sim.compiled_sampled): the same tick under jax.jit and lax.scan equals numpy ---------
+# -- the compiled loop (robotadapt.sim.driver): the same tick under jax.jit and lax.scan equals numpy ----------------
 
 def _forced(original: Any, backend: str) -> Any:
     """`sampled.integrate` with its backend fixed, whatever `simulate` asks for."""
@@ -312,17 +312,17 @@ def both(monkeypatch: pytest.MonkeyPatch, run: Any) -> tuple[Any, Any]:
     """`run()` (a call of simulate with a Sampled integrator) stepped by numpy, then compiled by JAX; the compiled
     driver must have been taken exactly once."""
     pytest.importorskip("jax", reason="the compiled loop needs JAX")
-    from robotadapt.sim import compiled_sampled, sampled
+    from robotadapt.sim import driver, sampled
 
     calls: list[int] = []
-    compiled = compiled_sampled.integrate_batch
+    compiled = driver._scan
 
     def counting(*args: Any, **kw: Any) -> Any:
         calls.append(1)
         return compiled(*args, **kw)
 
     original = sampled.integrate
-    monkeypatch.setattr(compiled_sampled, "integrate_batch", counting)
+    monkeypatch.setattr(driver, "_scan", counting)
     monkeypatch.setattr(sampled, "integrate", _forced(original, "numpy"))
     a = run()
     monkeypatch.setattr(sampled, "integrate", _forced(original, "jax"))
@@ -457,7 +457,7 @@ def test_a_diverging_run_stops_at_the_same_tick_compiled(monkeypatch, log_every)
 
 
 def test_sampled_loops_of_one_shape_share_a_program_and_keep_their_own_gains(monkeypatch):
-    from robotadapt.sim import compiled_sampled
+    from robotadapt.sim import driver
 
     arm = TwoLinkArm()
     finals, programs = [], []
@@ -467,7 +467,7 @@ def test_sampled_loops_of_one_shape_share_a_program_and_keep_their_own_gains(mon
                                                             integrator=Sampled(1e-3)))
         assert_same_run(a, b)
         finals.append(b.x[-1])
-        programs.append(len(compiled_sampled._PROGRAMS))
+        programs.append(len(driver.PROGRAMS))
     assert not np.allclose(finals[0], finals[1]) and programs[1] == programs[0]
 
 

@@ -5,6 +5,7 @@ No function here assigns into an array; each takes the namespace `xp` of its inp
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import array_api_compat
@@ -69,3 +70,27 @@ def solve(xp: Any, A: Any, b: Any) -> Any:
         b1, b2 = b[..., 0], b[..., 1]
         return xp.stack([(a22 * b1 - a12 * b2) / det, (a11 * b2 - a21 * b1) / det], axis=-1)
     return xp.linalg.solve(A, b[..., None])[..., 0]
+
+
+UNROLL = 4  # repeat: loops of at most this many bodies are written out in a traced program; longer: a fori_loop
+
+
+def repeat(xp: Any, count: int, body: Callable[[Any, Any], Any], init: Any) -> Any:
+    """body(count − 1, … body(1, body(0, init))): a Python loop for numpy and short loops, `lax.fori_loop` for longer
+    ones on JAX arrays (the same arithmetic, a smaller program)."""
+    if xp is np or count <= UNROLL:
+        for i in range(count):
+            init = body(i, init)
+        return init
+    import jax  # only reached with JAX arrays
+
+    return jax.lax.fori_loop(0, count, body, init)
+
+
+def rk4(f: Callable[[Any, Any], Any], t: Any, y: Any, h: float) -> Any:
+    """One classic RK4 step of dy/dt = f(t, y)."""
+    k1 = f(t, y)
+    k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
+    k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
+    k4 = f(t + h, y + h * k3)
+    return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)

@@ -7,7 +7,6 @@ from .base import (
     HasProjection,
     HasRegressor,
     NeedsAcceleration,
-    SimulationStop,
 )
 from .baseline import PD, ComputedTorque, PDGravity
 from .composite import Composite
@@ -39,5 +38,4 @@ __all__ = [
     "pid_servo",
     "state_space_servo",
     "ServoFilter",
-    "SimulationStop",
 ]

@@ -10,9 +10,9 @@ Controllers never see the true φ; only the optional monitors (`lyapunov`) take 
 
 Optional parts a controller may have, each a protocol below: a Lyapunov function, a filtered error, a regressor with its
 passivity output (for the integral (6.4.4)), acceleration feedback (Table 6.2.1 needs q̈), and a projection of its state
-applied after every integration step. A law whose own assumptions can fail on a state (M̂ singular) raises
-:class:`SimulationStop` there on numpy arrays and has a guard (:class:`HasGuard`), the indicator a compiled loop reads
-instead (traced code cannot raise). Either way the simulator ends the run there and keeps the partial result.
+applied after every integration step. A law whose own assumptions can fail on a state (M̂ singular) has a guard
+(:class:`HasGuard`), an indicator the loop reads on numpy and traced arrays alike (traced code cannot raise): the
+simulator ends the run there and keeps the partial result.
 """
 
 from __future__ import annotations
@@ -80,15 +80,15 @@ class NeedsAcceleration(ControlLaw, Protocol):
 
 @runtime_checkable
 class HasGuard(Protocol):
-    """A law whose assumptions can fail on a state (adaptive computed torque: M̂(q) must stay positive definite). On
-    numpy arrays its torque or update raises :class:`SimulationStop` there; traced arrays cannot raise, so there it
-    returns NaN and a compiled loop reads `guard` at every evaluation and stops the run itself, with `stop_reason`."""
+    """A law whose assumptions can fail on a state (adaptive computed torque: M̂(q) must stay positive definite). Its
+    torque or update returns NaN there, raising nothing (traced arrays cannot raise); the loop reads `guard` at every
+    evaluation and stops the run itself, with `stop_reason`."""
 
     def guard(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         """True where the law's assumption holds at (x, q), a boolean of shape `x.shape[:-1]`. Raises nothing."""
 
     def stop_reason(self, q: Array, x: Array) -> str:
-        """Why a run stops at (q, x) where the guard fails: the :class:`SimulationStop` message (numpy arrays)."""
+        """Why a run stops at (q, x) where the guard fails, in words (numpy arrays)."""
 
 
 @runtime_checkable
@@ -127,10 +127,6 @@ class HasDelayLine(Protocol):
 class Prepares(Protocol):
     def prepare(self, trajectory: Any, dt: float, t_final: float) -> Controller:
         """A copy of the controller with tables computed ahead of the run (e.g. Y_d along the desired trajectory)."""
-
-
-class SimulationStop(RuntimeError):
-    """Raised from a controller or plant when the run cannot go on; the message says why."""
 
 
 @runtime_checkable

@@ -2,9 +2,8 @@
 
 The update law needs the measured joint acceleration q̈ and the inverse of the estimated mass matrix M̂(q), so the
 controller implements :class:`~robotadapt.controllers.base.NeedsAcceleration` (the simulator hands it the plant's q̈
-for the torque it just applied; the torque itself does not need q̈). Where M̂ loses definiteness the update raises
-:class:`~robotadapt.controllers.base.SimulationStop` on numpy arrays; a compiled run reads the law's guard
-(:class:`~robotadapt.controllers.base.HasGuard`) instead and stops there too, with the same status. An optional box
+for the torque it just applied; the torque itself does not need q̈). Where M̂ loses definiteness the update is NaN and
+the loop, which reads the law's guard (:class:`~robotadapt.controllers.base.HasGuard`), stops the run there. An optional box
 projection of φ̂ keeps M̂ invertible (docs/laws.md#adaptive-computed-torque "Projection"). The equations are written
 against the array API of their
 inputs, so numpy and JAX run the same code.
@@ -22,7 +21,7 @@ from .._array import array_namespace, matvec, quad, solve
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_vector
-from .base import Array, EstimateState, SimulationStop, errors, estimate, freeze, gains, positive_definite
+from .base import Array, EstimateState, errors, estimate, freeze, gains, positive_definite
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,23 +148,21 @@ class AdaptiveComputedTorque(EstimateState):
         return positive_definite(array_namespace(x, q), self.model.mass_matrix(q, self.phi_hat(x)))
 
     def update(self, t: Array, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference) -> Array:
-        """dφ̂/dt = Γ Wᵀ M̂⁻¹ E1 (6.2.19), zero where it points out of the box. Where M̂(q) is not positive definite:
-        SimulationStop on numpy arrays, NaN on traced ones (which cannot raise; the loop reads `guard`)."""
+        """dφ̂/dt = Γ Wᵀ M̂⁻¹ E1 (6.2.19), zero where it points out of the box; NaN where M̂(q) is not positive definite
+        (the loop reads `guard` and stops the run there, with `stop_reason`)."""
         xp = array_namespace(x, q)
         phi_hat = self.phi_hat(x)
         M_hat = self.model.mass_matrix(q, phi_hat)
         ok = positive_definite(xp, M_hat)
-        if xp is np and not np.all(ok):
-            raise SimulationStop(_not_pd(M_hat, phi_hat))
         M_hat = xp.where(ok[..., None, None], M_hat, xp.eye(self.model.n))  # solve would raise on a singular M̂
         W = self.model.regressor(q, dq, dq, ddq)
         dx = matvec(W.mT, solve(xp, M_hat, self.filtered_error(t, x, q, dq, ref))) @ self.Gamma.T
         lo, hi = self.bounds
         dx = xp.where(((x <= lo) & (dx < 0)) | ((x >= hi) & (dx > 0)), 0.0, dx)
-        return dx if xp is np else xp.where(ok[..., None], dx, xp.nan)
+        return xp.where(ok[..., None], dx, xp.nan)
 
     def stop_reason(self, q: Array, x: Array) -> str:
-        """The SimulationStop message for a state (numpy arrays) whose M̂(q) is not positive definite."""
+        """Why a run stops at a state whose M̂(q) is not positive definite (HasGuard)."""
         phi_hat = self.phi_hat(np.asarray(x))
         return _not_pd(self.model.mass_matrix(np.asarray(q), phi_hat), phi_hat)
 

@@ -9,7 +9,7 @@ switching term larger than the disturbance restores V̇ ≤ −rᵀK_v r (6.7.12
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -45,6 +45,9 @@ class SignRobust:
     (6.4.4)), the φ̂ the torque uses (Landau's PI law, (6.4.20)), a projection, tables prepared ahead of the run — exists
     on the wrapper exactly when the base has it.
     """
+
+    not_differentiable: ClassVar[str] = ("switches (k_d sgn r): its gradient is zero almost everywhere; tune its base law, "
+                                         "then add k_d")
 
     model: RobotModel
     base: Any

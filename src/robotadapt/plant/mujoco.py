@@ -34,7 +34,7 @@ import sys
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 from xml.etree import ElementTree
 
 import numpy as np
@@ -137,6 +137,7 @@ class MujocoPlant(Plant):
     at the ticks as for the project's own plant; elastic joints, motors and a payload attached during the run are not
     modelled here; a disturbance torque is held over each MuJoCo step (:meth:`advance`)."""
 
+    stepped_on_host: ClassVar[bool] = True
     urdf: str | None = None
     locked_joints: tuple[str, ...] = ()
     timestep: float | None = None
@@ -348,9 +349,10 @@ class MujocoPlant(Plant):
         out[qadr] = q
         return out
 
-    def advance(self, t: float, s: Array, u: Array, steps: int, dt: float) -> np.ndarray:
-        """The state s = [q, q̇] at time t after `steps` MuJoCo steps of `dt` (s) with the torque u held; a disturbance
-        T_d(t, q, q̇) is subtracted, evaluated at the start of each MuJoCo step and held over it."""
+    def advance(self, t: float, s: Array, u: Array, steps: int, dt: float, dynamics: Any = None) -> np.ndarray:
+        """The state s = [q, q̇] at time t after `steps` MuJoCo steps of `dt` (s) with the torque u held (MuJoCo's
+        dynamics, not `dynamics`); a disturbance T_d(t, q, q̇) is subtracted, evaluated at the start of each MuJoCo step
+        and held over it."""
         mj = load_mujoco()
         model, data, qadr, vadr = self.engine
         n = self.model.n

@@ -14,11 +14,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, is_dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
-from .._array import array_namespace, matvec, solve
+from .._array import array_namespace, matvec, repeat, rk4, solve
 from ..robots.base import RobotModel
 from ..validation import ConfigError, as_scalar, as_vector
 from .actuators import Actuator, DCMotor
@@ -72,6 +72,8 @@ class Plant:
     actuator: Actuator | None = None
     sensor: Sensor | None = None
     _phi_loaded: Any = field(init=False, repr=False, metadata={"internal": True})
+
+    stepped_on_host: ClassVar[bool] = False  # stepped by another engine on the host (MuJoCo): the sampled-data loop, numpy
 
     def __post_init__(self) -> None:
         phi = as_vector(self.phi, self.model.p, "plant.phi", broadcast=False)
@@ -180,6 +182,13 @@ class Plant:
         if self.motor is not None:
             out.append(self.motor.current_rate(u, extra["current"], speed))
         return xp.concatenate(out, axis=-1)
+
+    def advance(self, t: Array, s: Array, u: Array, steps: int, dt: float,
+                dynamics: Callable[[Array, Array, Array], Array]) -> Array:
+        """The state s at time t after `steps` steps of `dt` with the torque u held (the sampled-data loop's hold):
+        classic RK4 of `dynamics(t, s, u)` = ds/dt. A plant stepped by another engine overrides it
+        (`stepped_on_host`)."""
+        return repeat(array_namespace(s), steps, lambda i, s: rk4(lambda t, s: dynamics(t, s, u), t + i * dt, s, dt), s)
 
     @property
     def fastest_rate(self) -> float:

@@ -7,39 +7,36 @@ differ between runs are stacked along a leading axis (:func:`stack`); models and
 step is the very code :func:`~robotadapt.sim.simulate` runs. A field may differ only where the class's math
 broadcasts it (`PER_RUN`); anything else raises :class:`NotBatchable` (simulate those runs one by one).
 
-Per run: a run whose state becomes non-finite or exceeds `max_state`, or whose controller stops (SimulationStop), is
-frozen there with its own status and partial record; the others go on. States are logged every `log_every` steps into
-one `(T, N, d)` array, so memory is bounded by the log; outputs (τ, V, r, passivity) and metrics are recomputed per run
-on demand by the same code as `simulate`, whose results a batch reproduces to round-off.
-"""
+Per run: a run whose state becomes non-finite or exceeds `max_state`, or whose law's guard fails, stops there with its
+own status and partial record; the others go on (the one driver, :mod:`robotadapt.sim.driver`). States are logged every
+`log_every` steps into one `(T, N, d)` array, so memory is bounded by the log; outputs (τ, V, r, passivity) and metrics
+are recomputed per run on demand by the same code as `simulate`, whose results a batch reproduces to round-off."""
 
 from __future__ import annotations
 
 import copy
-import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, fields, is_dataclass
 from functools import cached_property
 from typing import Any, TypeVar
 
 import numpy as np
 
-from .._array import array_namespace
-from ..controllers import DCAL, AdaptiveComputedTorque, Composite, InertiaRelated, PassivityBased, SimulationStop
+from ..controllers import DCAL, AdaptiveComputedTorque, Composite, InertiaRelated, PassivityBased
 from ..controllers.base import HasDelayLine, Prepares
 from ..plant.plant import Plant, SinusoidalDisturbance
-from ..trajectories import Reference, SumOfSines
+from ..trajectories import SumOfSines
 from ..validation import ConfigError, as_array, as_scalar, as_vector
+from .driver import drive
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
-from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, Ring, Step, diverged, sample, step, stop_status, take
+from .loop import MAX_LOG_BYTES, ClosedLoop, Ring, RK4Step
 from .outputs import batch_outputs, outputs
 from .result import SimulationResult
 from .status import Status
 
 Array = Any
 T = TypeVar("T")
-_REF_BYTES = 32e6  # reference samples evaluated ahead per chunk of steps (all runs together)
 
 # Fields that may differ between the runs of one batch: the class's math broadcasts them over a leading run axis
 # (`phi_hat0` is read only by `initial_state`, which the batch calls per run). Each entry is checked against single
@@ -292,24 +289,28 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
         line = Ring.start(np.stack([c.delay_line(dt, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)],
                                    axis=1))
 
-    def single(i: int) -> ClosedLoop:
-        return ClosedLoop(runs.plants[i], controllers[i], n, monitored=True)
-
+    singles = [RK4Step(ClosedLoop(p, controllers[i], n, monitored=True), dt, max_state)
+               for i, p in enumerate(runs.plants)]  # what words each run's status
     wall = time.perf_counter()
-    traj, z0 = stack(runs.trajectories, "trajectory"), loop.start(runs.s0, runs.x0)
+    rk4 = RK4Step(loop, dt, max_state)
+    z0 = loop.start(runs.s0, runs.x0)
+    feed = rk4.feed(stack(runs.trajectories, "trajectory"), runs=True)
     traceable = all(p.model.traceable for p in runs.plants) and all(c.model.traceable for c in controllers)
-    compiled = choose_backend(integrator.backend, n_steps * len(controllers), traceable) == "jax"
-    if compiled:
-        try:
-            t, z, n_logged, status = _compiled(loop, single, traj, z0, dt, n_steps, log_every, max_state, line)
-        except ConfigError as exc:  # "auto" steps a law whose code JAX cannot trace (a user's numpy code) with numpy
-            if integrator.backend != "auto" or exc.field != "simulation.backend":
-                raise
-            compiled = False
-    if not compiled:
-        t, z, n_logged, status = _integrate(loop, single, traj, z0, dt, n_steps, log_every, max_state, progress, line)
-    return BatchResult(t, z, n_logged, tuple(status), runs.plants, controllers, runs.trajectories,
-                       time.perf_counter() - wall, dict(info or {}))
+    backend = choose_backend(integrator.backend, n_steps * len(controllers), traceable)
+
+    def run(backend: str) -> Any:
+        return drive(singles, [], feed, n_steps, log_every, backend=backend, stacked=(rk4, (z0, line)),
+                     progress=progress)
+
+    try:
+        trace = run(backend)
+    except ConfigError as exc:  # "auto" steps a law whose code JAX cannot trace (a user's numpy code) with numpy
+        if integrator.backend != "auto" or exc.field != "simulation.backend":
+            raise
+        trace = run("numpy")
+    z = trace.records
+    return BatchResult(dt * (log_every * np.arange(len(z))), z, trace.n_logged, tuple(trace.status), runs.plants,
+                       controllers, runs.trajectories, time.perf_counter() - wall, dict(info or {}))
 
 
 def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, max_state: float, progress: bool,
@@ -317,13 +318,12 @@ def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, m
     """:func:`simulate_batch` of sampled-data runs: the runs' ticks compiled into one program mapped over the runs
     (:func:`robotadapt.sim.sampled.integrate_batch`), or stepped one by one by numpy; the runs must share one
     program's shape (they differ in arrays: gains, tables, true parameters), else NotBatchable."""
-    from ..plant.mujoco import MujocoPlant
     from .sampled import integrate_batch
-    from .simulation import mujoco_sampling
+    from .simulation import host_sampling
 
     for plant in runs.plants:  # MuJoCo steps its plant on the host: numpy ("auto"), or the single run's refusal
-        if isinstance(plant, MujocoPlant):
-            opts = mujoco_sampling(plant, opts)
+        if plant.stepped_on_host:
+            opts = host_sampling(plant, opts)
     Ts, (N, n) = opts.control_period, runs.q0.shape
     n_ticks = int(np.ceil(t_final / Ts - 1e-9))
     log_bytes = 8.0 * (n_ticks // log_every + 1) * N * (runs.s0.shape[1] + runs.x0.shape[1] + 2 + 4 * n)
@@ -369,117 +369,3 @@ def _prepared(controllers: tuple[Any, ...], trajectories: tuple[Any, ...], dt: f
         if (id(c), id(traj)) not in done:
             done[id(c), id(traj)] = c.prepare(traj, dt, t_final)
     return tuple(done[id(c), id(traj)] for c, traj in zip(controllers, trajectories, strict=True))
-
-
-def _row(ref: Reference, i: int) -> Reference:
-    """Run i's reference from one with a leading run axis of N or 1."""
-    return Reference(*(a[i if a.shape[0] > 1 else 0] for a in ref))
-
-
-def _advance(loop: ClosedLoop, z: Array, z_new: Array, alive: Array, max_state: float) -> tuple[Array, Array]:
-    """Accept the step for live runs whose new state is finite and within `max_state` (the guarded part of z); the
-    others keep their state. Returns (next state, runs that stopped now). Pure: no writes into its inputs."""
-    xp = array_namespace(z, z_new)
-    guarded = loop.guarded_part(z_new)
-    ok = xp.all(xp.isfinite(z_new), axis=-1) & (xp.max(xp.abs(guarded), axis=-1) <= max_state)
-    return xp.where((alive & ok)[:, None], z_new, z), alive & ~ok
-
-
-def _stand_in(z: Array, alive: Array) -> Array:
-    """Frozen runs take a live run's state for the step (the result is discarded), so that they raise nothing."""
-    xp = array_namespace(z)
-    return xp.where(alive[:, None], z, z[xp.argmax(alive)])
-
-
-def _stopped(single: Callable[[int], ClosedLoop], alive: Array, t: float, z: Array, line: Ring | None, k: int,
-             dt: float, refs: tuple[Reference, ...]) -> dict[int, str]:
-    """The live runs whose controller or plant raises on this step, found run by run, with the reason."""
-    out = {}
-    for i in np.flatnonzero(alive):
-        try:
-            one = None if line is None else Ring(line.slots[:, i], line.head[i])
-            step(single(int(i)), k, t, z[i], one, dt, *(_row(r, int(i)) for r in refs))
-        except (SimulationStop, np.linalg.LinAlgError) as stop:
-            out[int(i)] = str(stop)
-    return out
-
-
-def _compiled(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any, z0: Array, dt: float, n_steps: int,
-              log_every: int, max_state: float, line: Ring | None) -> tuple[Array, Array, Array, list[Status]]:
-    """:func:`_integrate` compiled by JAX (:mod:`robotadapt.sim.compiled`): the same samples and statuses."""
-    from .compiled import integrate
-
-    t, z, n_logged, t_bad, why, z_bad = integrate(loop, lambda times: traj(times[:, None]), z0, dt, n_steps, log_every,
-                                                  max_state, line)
-    status = [stop_status(single(i), float(t_bad[i]), int(why[i]), max_state, z_bad[i], dt) for i in range(z0.shape[0])]
-    T = int(n_logged.max())
-    return t[:T], z[:T], n_logged, status
-
-
-def _integrate(loop: ClosedLoop, single: Callable[[int], ClosedLoop], traj: Any, z0: Array, dt: float, n_steps: int,
-               log_every: int, max_state: float, progress: bool,
-               line: Ring | None) -> tuple[Array, Array, Array, list[Status]]:
-    """Fixed-step RK4 of every run from t = 0; returns the logged (t, z), the number of valid samples per run and the
-    statuses. The per-step math (:func:`~robotadapt.sim.loop.step`, `_advance`, `_stand_in`) writes into no array; the
-    driver around it (logging, statuses, the run-by-run search when a law raises) is host code. A frozen run's log
-    holds the state it stopped in."""
-    from tqdm import tqdm
-
-    N = z0.shape[0]
-    n_log = n_steps // log_every + 1
-    z_log = np.empty((n_log,) + z0.shape)
-    n_logged = np.full(N, n_log)
-    status = [Status.ok()] * N
-    alive = np.ones(N, dtype=bool)
-    z, k_log = z0, 0
-    m_max = int(max(1, min(CHUNK, _REF_BYTES // (48 * N * z0.shape[1]))))
-
-    def stop(why: dict[int, Status]) -> None:
-        for i, end in why.items():
-            status[i] = end
-        n_logged[list(why)] = k_log
-        alive[list(why)] = False
-
-    quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
-    with tqdm(total=n_steps, delay=1.0, disable=quiet, unit="step", leave=False, file=sys.stderr) as bar, \
-            np.errstate(all="ignore"):
-        for k in range(n_steps):
-            j = k % m_max
-            if j == 0:  # the reference at every stage instant of the next m_max steps, in one call
-                ref = traj((dt * (k + 0.5 * np.arange(2 * min(m_max, n_steps - k) + 1)))[:, None])
-                bar.update(min(m_max, n_steps - k))
-            t = k * dt
-            refs = (take(ref, 2 * j), take(ref, 2 * j + 1), take(ref, 2 * j + 2))
-            z_in = z if alive.all() else _stand_in(z, alive)
-            raised: dict[int, str] = {}
-            left = alive
-            try:
-                s: Step | None = step(loop, k, t, z_in, line, dt, *refs)
-            except (SimulationStop, np.linalg.LinAlgError):  # a law's assumptions failed in some run (numpy)
-                raised = _stopped(single, alive, t, z_in, line, k, dt, refs)
-                if not raised:
-                    raise
-                left = alive.copy()
-                left[list(raised)] = False
-                s = step(loop, k, t, _stand_in(z_in, left), line, dt, *refs) if left.any() else None
-            if k % log_every == 0:
-                applied = z if s is None else s.applied
-                z_log[k_log], k_log = applied if left.all() else np.where(left[:, None], applied, z), k_log + 1
-            if raised:
-                stop({i: Status.within(t, dt, why) for i, why in raised.items()})
-            if s is None:
-                break
-            z, now = _advance(loop, z, s.z, alive, max_state)
-            if now.any():
-                stop({int(i): Status.at(t + dt, str(diverged(loop.guarded_part(s.z[i]), max_state)))
-                      for i in np.flatnonzero(now)})
-            line = s.line
-            if not alive.any():
-                break
-        else:
-            if n_steps % log_every == 0:  # the sample at t_final, logged, not integrated
-                applied = z if line is None else sample(loop, n_steps, n_steps * dt, _stand_in(z, alive), line,
-                                                        refs[2])[0]
-                z_log[k_log] = np.where(alive[:, None], applied, z)
-    T = int(n_logged.max())
-    return dt * (log_every * np.arange(T)), z_log[:T], n_logged, status

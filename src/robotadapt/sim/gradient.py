@@ -170,7 +170,6 @@ def check_differentiable(loop: ClosedLoop) -> None:
     trace (Pinocchio), a law with a delay line (its ring is written in place) or a switching term (sgn(r): its gradient
     is zero almost everywhere and infinite at the switch)."""
     from ..controllers.base import HasDelayLine
-    from ..controllers.robust import SignRobust
 
     name = type(loop.controller).__name__
     if not (loop.plant.model.traceable and loop.controller.model.traceable):
@@ -179,6 +178,6 @@ def check_differentiable(loop: ClosedLoop) -> None:
     if isinstance(loop.controller, HasDelayLine):
         raise ConfigError("controller", f"{name} has a delay line (learning over a period): tuning does not "
                           "differentiate through it; tune another law")
-    if isinstance(loop.controller, SignRobust):
-        raise ConfigError("controller", f"{name} switches (k_d sgn r): its gradient is zero almost everywhere; tune "
-                          "its base law, then add k_d")
+    why = getattr(loop.controller, "not_differentiable", None)  # a law's own hook: why jax.grad cannot go through it
+    if why:
+        raise ConfigError("controller", f"{name} {why}")

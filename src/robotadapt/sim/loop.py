@@ -11,7 +11,9 @@ that the numpy drivers loop over it and the compiled engine scans over it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -19,11 +21,12 @@ import numpy as np
 from .._array import array_namespace, matvec
 from ..controllers.base import FiltersTorque, HasGuard, HasInstantEstimate, HasProjection, HasRegressor, NeedsAcceleration
 from ..plant.plant import Plant, same_model
-from ..trajectories import Reference
+from ..trajectories import Reference, Trajectory
+from .driver import GUARD, Verdict
 from .status import Status
 
 Array = Any
-CHUNK = 2048  # steps whose reference is evaluated in one vectorized call
+Rate = Callable[[Any, Array, Reference], tuple[Array, Array | None]]  # (t, z, ref) -> (dz/dt, ok): ClosedLoop.rate
 MAX_LOG_BYTES = 4e9
 
 
@@ -103,11 +106,11 @@ class ClosedLoop:
         return ds, ds[..., self.n : 2 * self.n]
 
     def rate(self, t: Array, z: Array, ref: Reference) -> tuple[Array, Array | None]:
-        """(dz/dt, ok). `ok` is a guarded law's guard (HasGuard) per run on traced arrays, False where its assumption
-        fails at z (dz/dt then holds NaN); None otherwise: on numpy arrays such a law raises SimulationStop itself."""
+        """(dz/dt, ok). `ok` is a guarded law's guard (HasGuard) per run, False where its assumption fails at z (dz/dt
+        then holds NaN); None for a law without one."""
         q, dq, x = self.split(z)
         xp = array_namespace(z)
-        ok = self.controller.guard(t, x, q, dq, ref) if self.guarded and xp is not np else None
+        ok = self.controller.guard(t, x, q, dq, ref) if self.guarded else None
         if self.needs_acceleration:
             tau = self.controller.torque(t, x, q, dq, ref)
             head, ddq = self._plant(t, z, q, dq, self.plant.saturate(tau))
@@ -126,6 +129,13 @@ class ClosedLoop:
 
     def __call__(self, t: Array, z: Array, ref: Reference) -> Array:
         return self.rate(t, z, ref)[0]
+
+    def divergence(self, z: Array, max_state: float) -> Array:
+        """The divergence guard at z, per run: 0 where the guarded part is finite and within `max_state`, else the code
+        of :data:`REASONS` (1 non-finite, 2 beyond `max_state`)."""
+        xp = array_namespace(z)
+        part = self.guarded_part(z)
+        return xp.where(xp.all(xp.isfinite(part), axis=-1), xp.where(xp.max(xp.abs(part), axis=-1) > max_state, 2, 0), 1)
 
     def stop_reason(self, z: Array) -> str:
         """Why a guarded law stops at the state z (numpy) where its guard fails."""
@@ -149,32 +159,6 @@ class ClosedLoop:
 
 
 REASONS = {1: "non-finite state", 2: "state exceeded {max_state:g} in magnitude"}  # why the divergence guard stopped
-GUARD = 3  # the reason code of a stop by the law's own guard (HasGuard): the text comes from the law
-
-
-def diverged_status(t: float, why: int, max_state: float) -> Status:
-    """The status of a run the compiled guard stopped at `t` for reason code `why` (a key of `REASONS`; 0: none)."""
-    return Status.at(t, REASONS[why].format(max_state=max_state)) if why else Status.ok()
-
-
-def stop_status(loop: ClosedLoop, t: float, why: int, max_state: float, z_bad: Array, dt: float) -> Status:
-    """:func:`diverged_status`, and for `why` = GUARD the law's own reason, from the stage state `z_bad` it failed at
-    inside the step from `t` to `t + dt`."""
-    if why == GUARD:
-        return Status.within(t, dt, loop.stop_reason(z_bad))
-    return diverged_status(t, why, max_state)
-
-
-def diverged(z: Array, max_state: float) -> str | None:
-    if not np.all(np.isfinite(z)):  # z: the guarded part [s, x] (ClosedLoop.guarded_part)
-        return REASONS[1]
-    if np.max(np.abs(z)) > max_state:
-        return REASONS[2].format(max_state=max_state)
-    return None
-
-
-def take(ref: Reference, i: int) -> Reference:
-    return Reference(ref.q_des[i], ref.dq_des[i], ref.ddq_des[i])
 
 
 @dataclass(frozen=True)
@@ -229,18 +213,19 @@ def sample(loop: ClosedLoop, k: Any, t: Any, z: Array, line: Ring, ref: Referenc
     return loop.with_x(z, x_new), Ring(slots, ring_read(slots, (k + 1) % n))
 
 
-def rk4_step(loop: ClosedLoop, t: Any, z: Array, dt: float, r0: Reference, rh: Reference,
-             r1: Reference) -> tuple[Array, Array | None, Array | None]:
-    """One classic RK4 step: (z at t + dt, ok, z_bad). For a guarded law on traced arrays, `ok` per run says its guard
-    held in all four stages and `z_bad` is the state of the first stage where it did not (else None, None: on numpy
-    arrays the law raises SimulationStop in the stage)."""
-    k1, ok1 = loop.rate(t, z, r0)
+def rk4_step(loop: ClosedLoop, t: Any, z: Array, dt: float, r0: Reference, rh: Reference, r1: Reference,
+             rate: Rate | None = None) -> tuple[Array, Array | None, Array | None]:
+    """One classic RK4 step of `rate` (default `loop.rate`): (z at t + dt, ok, z_bad). For a guarded law, `ok` per run
+    says its guard held in all four stages and `z_bad` is the state of the first stage where it did not (else None,
+    None)."""
+    rate = loop.rate if rate is None else rate
+    k1, ok1 = rate(t, z, r0)
     z2 = z + 0.5 * dt * k1
-    k2, ok2 = loop.rate(t + 0.5 * dt, z2, rh)
+    k2, ok2 = rate(t + 0.5 * dt, z2, rh)
     z3 = z + 0.5 * dt * k2
-    k3, ok3 = loop.rate(t + 0.5 * dt, z3, rh)
+    k3, ok3 = rate(t + 0.5 * dt, z3, rh)
     z4 = z + dt * k3
-    k4, ok4 = loop.rate(t + dt, z4, r1)
+    k4, ok4 = rate(t + dt, z4, r1)
     z_new = loop.after_step(z + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
     if ok1 is None or ok2 is None or ok3 is None or ok4 is None:
         return z_new, None, None
@@ -260,10 +245,69 @@ class Step(NamedTuple):
 
 
 def step(loop: ClosedLoop, k: Any, t: Any, z: Array, line: Ring | None, dt: float, r0: Reference, rh: Reference,
-         r1: Reference) -> Step:
+         r1: Reference, rate: Rate | None = None) -> Step:
     """Fixed step k from t = k·dt: the delay line's sample (if any), then RK4 with the sampled part of x held over the
-    step's stages. Pure: the one step function of every fixed-step driver (numpy, batch, compiled)."""
+    step's stages. Pure: the step of :class:`RK4Step` and of the differentiable rollout."""
     if line is not None:
         z, line = sample(loop, k, t, z, line, r0)
-    z_new, ok, z_bad = rk4_step(loop, t, z, dt, r0, rh, r1)
+    z_new, ok, z_bad = rk4_step(loop, t, z, dt, r0, rh, r1, rate)
     return Step(z, line, z_new, ok, z_bad)
+
+
+class StepInputs(NamedTuple):
+    """What fixed step k takes from outside: k, t_k and the reference at t_k, t_k + dt/2, t_k + dt."""
+
+    k: Array
+    t: Array
+    r0: Reference
+    rh: Reference
+    r1: Reference
+
+
+@dataclass(frozen=True, eq=False)
+class RK4Step:
+    """A continuous-time run's fixed step as a transition of the one driver (:mod:`robotadapt.sim.driver`): carry (z,
+    delay line or None), inputs (k, t_k, the reference at t_k, t_k + dt/2, t_k + dt); the record is the state applied
+    over step k (what the log at t_k holds); the verdict is the divergence guard on z_{k+1} (codes of `REASONS`: a stop
+    at t_k + dt) or a guarded law's guard failing in a stage (GUARD: a stop within the step, with the law's reason at
+    the stage state where it failed)."""
+
+    loop: ClosedLoop
+    dt: float
+    max_state: float
+
+    def __call__(self, carry: tuple[Array, Ring | None], inputs: StepInputs,
+                 rate: Rate | None = None) -> tuple[tuple[Array, Ring | None], Array, Verdict]:
+        k, t, r0, rh, r1 = inputs
+        s = step(self.loop, k, t, carry[0], carry[1], self.dt, r0, rh, r1, rate)
+        why = self.loop.divergence(s.z, self.max_state)
+        if s.ok is not None:
+            why = array_namespace(why).where(s.ok, why, GUARD)
+        return (s.z, s.line), s.applied, Verdict(None, why, s.z_bad)
+
+    def compiled(self) -> Callable[[Any, Any], Any]:
+        """The step with dz/dt as a function of its own (an n-DOF arm's dynamics are thousands of operations: traced
+        and lowered once, not once per RK4 stage) and its short sums written out (:func:`robotadapt.sim.compiled.lean`)."""
+        from .compiled import jax_module, lean
+
+        return lean(partial(self.__call__, rate=jax_module().jit(self.loop.rate)))
+
+    def program_key(self) -> RK4Step:
+        return self
+
+    def feed(self, trajectory: Trajectory, runs: bool = False) -> Callable[[int, int], Any]:
+        """The inputs of steps first … first + count − 1: the reference at each step's three stage instants in one
+        vectorized call (`runs`: a merged trajectory with a run axis, sampled on `(times, 1)`)."""
+        def inputs(first: int, count: int) -> Any:
+            times = self.dt * (first + 0.5 * np.arange(2 * count + 1))
+            ref = trajectory(times[:, None] if runs else times)
+            k = np.arange(first, first + count)
+            return StepInputs(k, self.dt * k, *(Reference(*(a[at : at + 2 * count : 2] for a in ref)) for at in (0, 1, 2)))
+
+        return inputs
+
+    def status(self, k: int, why: int, bad: Array | None) -> Status:
+        t = k * self.dt
+        if why == GUARD:
+            return Status.within(t, self.dt, self.loop.stop_reason(bad))
+        return Status.at(t + self.dt, REASONS[why].format(max_state=self.max_state))

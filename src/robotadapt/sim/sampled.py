@@ -2,20 +2,19 @@
 hold on the torque, the plant integrated between ticks.
 
 One tick is one pure function, :class:`Tick`: `carry_{k+1}, record_k, verdict_k = tick(carry_k, inputs_k)`, written
-against the array API of its inputs (no writes into arrays, no branch on a value), so that the numpy driver here loops
-over it and the compiled driver (:mod:`robotadapt.sim.compiled_sampled`) scans over it. Everything that changes from
-tick to tick is in the carry (:class:`Carry`): the plant's state s, the controller's x, the sensor's memory, the
-actuator's held torque and commands in flight, and the delay line of the repetitive law. What comes from outside is an
-input (:class:`Inputs`): k, t_k, the reference at t_k and the tick's noise draws (numpy draws them from the run's seed
-ahead, a block of ticks at a time, for both drivers). Tick k:
+against the array API of its inputs (no writes into arrays, no branch on a value): a transition of the one driver
+(:mod:`robotadapt.sim.driver`), which loops over it in Python (numpy) or scans over it (JAX), as over the continuous
+step. Everything that changes from tick to tick is in the carry (:class:`Carry`): the plant's state s, the controller's
+x, the sensor's memory, the actuator's held torque and commands in flight, and the delay line of the repetitive law.
+What comes from outside is an input (:class:`Inputs`): k, t_k, the reference at t_k and the tick's noise draws (numpy
+draws them from the run's seed ahead, a block of ticks at a time, for both drivers). Tick k:
 
 1. measure (q_m, q̇_m, q̈_m) from the plant's state through its sensor (:mod:`robotadapt.plant.sensors`; exact samples
    without one);
 2. a delay line (the repetitive law, N = T/Ts ticks per period) is read at slot k mod N and written with what the law
    returns (a new array: :func:`robotadapt.sim.loop.ring_write`);
 3. the controller gives τ_k and ẋ_k from (t_k, x_k, q_m, q̇_m, ref(t_k)) (with q̈_m for a law that needs it); where a
-   guarded law's assumption fails (HasGuard: raised on numpy arrays, read from its guard on traced ones) the run stops
-   at t_k, this tick unlogged;
+   guarded law's assumption fails (HasGuard, its guard read at the sample) the run stops at t_k, this tick unlogged;
 4. the actuator turns τ_k into the applied u_k (delay, saturation, rate limit; :mod:`robotadapt.plant.actuators`);
 5. the record of the tick: the true state s_k, x_k, u_k, τ_k, q_m, q̇_m (the drivers keep every `log_every`-th);
 6. the plant: `substeps` RK4 steps of dt = Ts/substeps of ds/dt = f(t, s, u_k) (a MuJoCo plant: `substeps` steps of
@@ -24,27 +23,26 @@ ahead, a block of ticks at a time, for both drivers). Tick k:
 7. the divergence guard on (s_{k+1}, x_{k+1}): the run stops at t_k + Ts on a non-finite state or one beyond
    `max_state` (:class:`Verdict`, codes of :data:`robotadapt.sim.loop.REASONS` and `GUARD`).
 
-The last tick (t = t_final) is measured, computed and logged, not integrated. On numpy arrays a law raises
-:class:`SimulationStop` itself, and the numpy driver stops the run at its tick (unlogged if raised at the sample).
+The last tick (t = t_final) is measured, computed and logged, not integrated (the driver's rule).
 """
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from .._array import array_namespace
-from ..controllers.base import FiltersTorque, HasProjection, SimulationStop
+from .._array import array_namespace, repeat, rk4
+from ..controllers.base import FiltersTorque, HasProjection
 from ..plant.actuators import Actuator
-from ..plant.mujoco import MujocoPlant
 from ..plant.sensors import Sensor
 from ..trajectories import Reference
 from .compiled import jax_module
-from .loop import CHUNK, GUARD, ClosedLoop, diverged_status, ring_write, take
+from .driver import GUARD, Verdict, drive
+from .loop import REASONS, ClosedLoop, ring_write
 from .status import Status
 
 if TYPE_CHECKING:
@@ -53,7 +51,7 @@ if TYPE_CHECKING:
     from .loop import DelayLine
 
 Array = Any
-UNROLL = 4  # plant sub-steps (and "hold" sub-steps) written out in the compiled tick; more: a loop inside it
+Dynamics = Callable[[Array, Array, Array], Array]  # (t, s, u) -> ds/dt
 
 
 class Carry(NamedTuple):
@@ -99,34 +97,6 @@ class Record(NamedTuple):
     dq_measured: Array
 
 
-class Verdict(NamedTuple):
-    """How tick k ended (None where the law has no guard)."""
-
-    held: Array | None  # the guard held at the sample; if not, the run stops at t_k and the tick is not logged
-    why: Array  # after the hold: 0 go on, 1 or 2 (REASONS) stop at t_k + Ts, GUARD stop at t_k ("hold" sub-step)
-    q_bad: Array | None  # where a guard failed: the q and x its law was evaluated at (Tick.status)
-    x_bad: Array | None
-
-
-def repeat(xp: Any, count: int, body: Callable[[Any, Any], Any], init: Any) -> Any:
-    """body(count − 1, … body(1, body(0, init))): a Python loop for numpy and short loops, `lax.fori_loop` for longer
-    ones on JAX arrays (the same arithmetic, a smaller program)."""
-    if xp is np or count <= UNROLL:
-        for i in range(count):
-            init = body(i, init)
-        return init
-    return jax_module().lax.fori_loop(0, count, body, init)
-
-
-def rk4(f: Callable[[Any, Array], Array], t: Any, y: Array, h: float) -> Array:
-    """One classic RK4 step of dy/dt = f(t, y)."""
-    k1 = f(t, y)
-    k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
-    k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
-    k4 = f(t + h, y + h * k3)
-    return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-
-
 def guarded_rk4(g: Callable[[Array], tuple[Array, Array]], y: Array, h: float) -> tuple[Array, Array, Array]:
     """:func:`rk4` of dy/dt = g(y)[0], g also giving a guard: (the step, whether it held in all four stages, the first
     stage state where it did not)."""
@@ -170,14 +140,29 @@ class Tick:
         return Carry(s, x, self.sensor.start(s[:n], s[n : 2 * n], Ts), self.actuator.start(), buffer,
                      np.zeros(self.loop.w))
 
-    def __call__(self, carry: Carry, inputs: Any) -> tuple[Carry, Record, Verdict]:
-        """(carry_{k+1}, record_k, verdict_k): steps 1–7 of the module docstring."""
+    def __call__(self, carry: Carry, inputs: Any, dynamics: Dynamics | None = None) -> tuple[Carry, Record, Verdict]:
+        """(carry_{k+1}, record_k, verdict_k): steps 1–7 of the module docstring; `dynamics` the plant's ds/dt
+        (default :meth:`dynamics`). The verdict's `held` is the guard at the sample, its `bad` the (q, x) a guard failed
+        at."""
         mid, sample = self.sample(carry, inputs)
-        new, why, x_bad = self.advance(mid, inputs, sample)
+        new, why, x_bad = self.advance(mid, inputs, sample, dynamics or self.dynamics)
         if sample.ok is None:
-            return new, self.record(mid, sample), Verdict(None, why, None, None)
+            return new, self.record(mid, sample), Verdict(None, why, None)
         x_bad = array_namespace(mid.x).where(sample.ok, x_bad, mid.x)
-        return new, self.record(mid, sample), Verdict(sample.ok, why, sample.q_m, x_bad)
+        return new, self.record(mid, sample), Verdict(sample.ok, why, (sample.q_m, x_bad))
+
+    def compiled(self) -> Callable[[Carry, Any], tuple[Carry, Record, Verdict]]:
+        """The tick with the plant's ds/dt as a function of its own: traced once, called by every RK4 stage of every
+        plant sub-step (an n-DOF arm's dynamics: thousands of operations)."""
+        return partial(self.__call__, dynamics=jax_module().jit(self.dynamics))
+
+    def program_key(self) -> Tick:
+        """The tick with its sensor's seed set aside: the noise is drawn on the host from each run's own seed, so runs
+        that differ only in it share one program."""
+        loop, plant = self.loop, self.loop.plant
+        if plant.sensor is not None:
+            loop = replace(loop, plant=replace(plant, sensor=replace(plant.sensor, seed=0)))
+        return replace(self, loop=loop, sensor=replace(self.sensor, seed=0))
 
     def sample(self, carry: Carry, inputs: Any) -> tuple[Carry, Sample]:
         """Steps 1–4: the carry with the sensor's, the delay line's and the actuator's memory advanced and x_k read
@@ -190,7 +175,7 @@ class Tick:
             slot = k % line.shape[0]
             x, store = ctrl.sample(t, x, q_m, dq_m, ref, array_namespace(line).asarray(line[slot], copy=True))
             line = ring_write(line, slot, store)
-        ok = ctrl.guard(t, x, q_m, dq_m, ref) if self.guarded(s) else None
+        ok = ctrl.guard(t, x, q_m, dq_m, ref) if self.loop.guarded else None
         if self.loop.needs_acceleration:
             tau = ctrl.torque(t, x, q_m, dq_m, ref)
             u, actuator = self.actuator.apply(carry.actuator, tau, Ts)
@@ -209,15 +194,15 @@ class Tick:
         z = array_namespace(carry.s, carry.x).concatenate([carry.s, carry.x, carry.w])
         return Record(z, sample.u, sample.tau, sample.q_m, sample.dq_m)
 
-    def advance(self, carry: Carry, inputs: Any, sample: Sample) -> tuple[Carry, Array, Array | None]:
+    def advance(self, carry: Carry, inputs: Any, sample: Sample,
+                dynamics: Dynamics) -> tuple[Carry, Array, Array | None]:
         """Steps 6–7: the carry one tick on, the code why the run stops there (0: it goes on) and, for a guarded law,
         the state x its guard failed at under "hold" (x_k otherwise; None without a guard read)."""
         t, ref = inputs[1], inputs[2]
         x, ok, x_bad = self.next_state(t, ref, carry.x, sample)
-        s = self.hold(t, carry.s, sample.u)
+        s = self.hold(t, carry.s, sample.u, dynamics)
         xp = array_namespace(s, x)
-        z = self.loop.guarded_part(xp.concatenate([s, x, carry.w]))  # as the continuous guard: no monitor records
-        why = xp.where(xp.all(xp.isfinite(z)), xp.where(xp.max(xp.abs(z)) > self.max_state, 2, 0), 1)
+        why = self.loop.divergence(xp.concatenate([s, x, carry.w]), self.max_state)
         if ok is not None:
             why = xp.where(ok, why, GUARD)
         elif sample.ok is not None:
@@ -227,10 +212,6 @@ class Tick:
             total = carry.w[:1] + self.opts.control_period * sample.dw
             w = xp.concatenate([total, xp.minimum(carry.w[1:], total)])
         return carry._replace(s=s, x=x, w=w), why, x_bad
-
-    def guarded(self, s: Array) -> bool:
-        """Whether the tick reads the law's guard (HasGuard): on traced arrays; on numpy ones the law raises itself."""
-        return self.loop.guarded and array_namespace(s) is not np
 
     def project(self, x: Array) -> Array:
         return self.loop.controller.project(x) if self.projects else x
@@ -260,30 +241,28 @@ class Tick:
 
         return repeat(xp, opts.substeps, guarded, (x, xp.asarray(True), x))
 
-    def hold(self, t: Array, s: Array, u: Array) -> Array:
-        """The plant's state one control period on, under the held torque u: `substeps` RK4 steps of dt (MuJoCo's own
-        steps of dt for a MuJoCo plant, numpy only)."""
-        plant, n, h = self.loop.plant, self.loop.n, self.opts.dt
-        if isinstance(plant, MujocoPlant):
-            return plant.advance(t, s, u, self.opts.substeps, h)
+    def dynamics(self, t: Array, s: Array, u: Array) -> Array:
+        """The plant's ds/dt under the applied torque u (rigid: [q̇, the plant's acceleration], as in the continuous
+        loop)."""
+        plant, n = self.loop.plant, self.loop.n
+        if self.loop.rigid:
+            return array_namespace(s).concatenate([s[n:], plant.acceleration(t, s[:n], s[n:], u)])
+        return plant.derivative(t, s, u)
 
-        def f(t: Array, s: Array) -> Array:
-            if self.loop.rigid:  # the state [q, q̇]: the plant's acceleration, as in the continuous loop
-                return array_namespace(s).concatenate([s[n:], plant.acceleration(t, s[:n], s[n:], u)])
-            return plant.derivative(t, s, u)
+    def hold(self, t: Array, s: Array, u: Array, dynamics: Dynamics) -> Array:
+        """The plant's state one control period on, under the held torque u: the plant's advance hook
+        (:meth:`robotadapt.plant.plant.Plant.advance`: `substeps` RK4 steps of dt of `dynamics`; MuJoCo's own steps for
+        a MuJoCo plant)."""
+        return self.loop.plant.advance(t, s, u, self.opts.substeps, self.opts.dt, dynamics)
 
-        return repeat(array_namespace(s), self.opts.substeps, lambda i, s: rk4(f, t + i * h, s, h), s)
-
-    def status(self, t: float, why: int, q_bad: Array, x_bad: Array) -> Status:
-        """The status of a run stopped at `t` for the code `why` (a guard: the law's reason at (q_bad, x_bad))."""
+    def status(self, k: int, why: int, bad: tuple[Array, Array] | None) -> Status:
+        """The status of a run stopped at tick k for the code `why`: at t_k for a guard (the law's reason at the (q, x)
+        of `bad`), at t_k + Ts for the divergence guard."""
+        t = k * self.opts.control_period
         if why == GUARD:
+            q_bad, x_bad = bad  # type: ignore[misc]
             return Status.at(t, str(self.loop.controller.stop_reason(np.asarray(q_bad), np.asarray(x_bad))))
-        return diverged_status(t, why, self.max_state)
-
-    def blank(self, carry: Carry) -> Record:
-        """A record of zeros shaped like this tick's (what a compiled block starts from)."""
-        n = self.loop.n
-        return Record(np.zeros(carry.s.size + carry.x.size + carry.w.size), *(np.zeros(n) for _ in range(4)))
+        return Status.at(t + self.opts.control_period, REASONS[why].format(max_state=self.max_state))
 
     def logged(self, records: Record) -> dict[str, Array]:
         """The result's signals from the stacked records: `tau` (applied), and `tau_commanded` with an actuator,
@@ -294,32 +273,58 @@ class Tick:
         return {name: getattr(records, name) for name in keep}
 
 
+def feed(ticks: list[Tick], trajectories: list[Trajectory], shared: bool) -> tuple[Callable[[int, int], Inputs], Inputs]:
+    """The inputs of ticks first … first + count − 1 for every run: k, t_k shared; the reference shared (`shared`: one
+    trajectory for all) or per run on axis 1; the sensors' noise drawn from each run's seed, in order, per run on axis
+    1 (zeros, shared, where no run is noisy). Returns the feed and which inputs are per run (the driver's `mapped`)."""
+    Ts, n = ticks[0].opts.control_period, ticks[0].loop.n
+    noisy = any(t.sensor.noise_q is not None or t.sensor.noise_dq is not None for t in ticks)
+    draws = [_Draws(tick.sensor) for tick in ticks]
+
+    def inputs(first: int, count: int) -> Inputs:
+        k = np.arange(first, first + count)
+        refs = [trajectory(Ts * k) for trajectory in trajectories[: 1 if shared else None]]
+        ref = refs[0] if shared else Reference(*(np.stack(parts, axis=1) for parts in zip(*refs, strict=True)))
+        noise = np.stack([d(first, count) for d in draws], axis=1) if noisy else np.zeros((count, 2, n))
+        return Inputs(k, Ts * k, ref, noise)
+
+    return inputs, Inputs(False, False, not shared, noisy)  # type: ignore[arg-type]
+
+
+class _Draws:
+    """A run's noise draws by tick: ticks first … first + count − 1 of its seed's one sequence, whatever the order of
+    the requests (a tick asked for again gets the same draws; ticks before the last request's first are forgotten)."""
+
+    def __init__(self, sensor: Sensor) -> None:
+        self.sensor, self.rng = sensor, sensor.generator()
+        self.start, self.ahead = 0, np.zeros((0, 2, sensor.n))
+
+    def __call__(self, first: int, count: int) -> Array:
+        end = self.start + len(self.ahead)
+        if first + count > end:
+            self.ahead = np.concatenate([self.ahead, self.sensor.noise(self.rng, first + count - end)])
+        self.ahead, self.start = self.ahead[first - self.start :], first
+        return self.ahead[:count]
+
+
 def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory], z0: Array, opts: Sampled,
                     n_ticks: int, log_every: int, max_state: float, progress: bool, lines: list[Array] | None,
                     backend: str = "numpy") -> tuple[Array, Array, Array, list[Status], dict[str, Array]]:
-    """N runs' ticks 0 … `n_ticks`: compiled together (`backend` "jax", :func:`compiled_sampled.integrate_batch`, one
-    program mapped over the runs) or one by one by the numpy driver (the reference). `traj`: one trajectory for every
-    run or one per run; `z0` `(N, d)`; `lines` each run's delay line contents (None: no line). Returns the logged
-    times, the states `(T, N, d)`, each run's logged count (a stopped run's rows after it repeat its last one), the
-    statuses and the logged signals `(T, N, n)` (:meth:`Tick.logged`)."""
+    """N runs' ticks 0 … `n_ticks` through the one driver: one program mapped over the runs (`backend` "jax") or the
+    runs one by one in Python ("numpy", the reference). `traj`: one trajectory for every run or one per run; `z0`
+    `(N, d)`; `lines` each run's delay line contents (None: no line). Returns the logged times, the states `(T, N, d)`,
+    each run's logged count (a stopped run's rows after it repeat its last one), the statuses and the logged signals
+    `(T, N, n)` (:meth:`Tick.logged`)."""
     ticks = [Tick(loop, opts, loop.plant.sensor or Sensor(loop.n), loop.plant.actuator or Actuator(loop.n), max_state,
                   lines is not None) for loop in loops]
     carries = [tick.start(z0[i], None if lines is None else lines[i]) for i, tick in enumerate(ticks)]
-    trajs = traj if isinstance(traj, list) else [traj] * len(loops)
-    if backend == "jax":
-        from .compiled_sampled import integrate_batch as compiled
-
-        t, records, n_logged, status = compiled(ticks, carries, traj, n_ticks, log_every)
-        logged = Record(*records)
-    else:
-        runs = [_run(tick, carry, trajs[i], n_ticks, log_every, progress) for i, (tick, carry) in
-                enumerate(zip(ticks, carries, strict=True))]
-        n_logged = np.array([len(t) for t, _, _ in runs])
-        t = max((t for t, _, _ in runs), key=len)
-        status = [st for _, _, st in runs]
-        logged = Record(*(np.stack([np.concatenate([a, np.repeat(a[-1:], len(t) - len(a), axis=0)]) for a in parts],
-                                   axis=1) for parts in zip(*(rec for _, rec, _ in runs), strict=True)))
-    return t, logged.z, n_logged, status, ticks[0].logged(logged)
+    shared = not isinstance(traj, list)
+    inputs, mapped = feed(ticks, [traj] if not isinstance(traj, list) else traj, shared)
+    trace = drive(ticks, carries, inputs, n_ticks, log_every, backend=backend, mapped=mapped, progress=progress)
+    records = trace.records
+    T = records.z.shape[0]
+    return (opts.control_period * (log_every * np.arange(T)), records.z, trace.n_logged, trace.status,
+            ticks[0].logged(records))
 
 
 def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: int, log_every: int,
@@ -332,45 +337,3 @@ def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, n_ti
     t, z, _, status, logged = integrate_batch([loop], traj, np.asarray(z0)[None], opts, n_ticks, log_every, max_state,
                                               progress, None if line is None else [line.buffer], backend)
     return t, z[:, 0], status[0], {name: a[:, 0] for name, a in logged.items()}
-
-
-def _run(tick: Tick, carry: Carry, traj: Trajectory, n_ticks: int, log_every: int,
-         progress: bool) -> tuple[Array, Record, Status]:
-    """The numpy driver: the tick in a Python loop, the reference and the noise drawn a block of ticks at a time."""
-    from tqdm import tqdm
-
-    Ts = tick.opts.control_period
-    rng = tick.sensor.generator()
-    n_log = n_ticks // log_every + 1
-    logs = Record(*(np.empty((n_log, width)) for width in (carry.s.size + carry.x.size + carry.w.size,)
-                    + (tick.loop.n,) * 4))
-    k_log, status, start = 0, Status.ok(), 0
-    quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
-    with tqdm(total=n_ticks + 1, delay=1.0, disable=quiet, unit="tick", leave=False, file=sys.stderr) as bar, \
-            np.errstate(all="ignore"):
-        while status == "ok" and start <= n_ticks:
-            count = min(CHUNK, n_ticks + 1 - start)
-            ref = traj(Ts * (start + np.arange(count)))
-            noise = tick.sensor.noise(rng, count)
-            for k in range(start, start + count):
-                t = k * Ts
-                inputs = Inputs(k, t, take(ref, k - start), noise[k - start])
-                try:
-                    mid, sample = tick.sample(carry, inputs)  # a guarded law raises here on numpy arrays
-                    if k % log_every == 0:
-                        for log, value in zip(logs, tick.record(mid, sample), strict=True):
-                            log[k_log] = value
-                        k_log += 1
-                    if k == n_ticks:
-                        break
-                    new, why, x_bad = tick.advance(mid, inputs, sample)
-                except SimulationStop as stop:  # a guarded law (or one that raises of its own) on numpy arrays
-                    status = Status.at(t, str(stop))
-                    break
-                if why:
-                    status = tick.status(t if why == GUARD else t + Ts, int(why), sample.q_m, x_bad)
-                    break
-                carry = new
-            start += count
-            bar.update(count)
-    return Ts * (log_every * np.arange(k_log)), Record(*(log[:k_log] for log in logs)), status

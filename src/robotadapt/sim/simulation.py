@@ -10,20 +10,18 @@ pure controller maps, vectorized over time (:mod:`robotadapt.sim.outputs`); a sa
 
 from __future__ import annotations
 
-import sys
 import time
-from functools import partial
 from typing import Any
 
 import numpy as np
 
-from ..controllers.base import Controller, HasDelayLine, NeedsAcceleration, Prepares, SimulationStop
-from ..plant.mujoco import MujocoPlant
+from ..controllers.base import Controller, HasDelayLine, NeedsAcceleration, Prepares
 from ..plant.plant import Plant, same_model
 from ..trajectories import Trajectory
 from ..validation import ConfigError, as_scalar, as_vector
+from .driver import drive
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
-from .loop import CHUNK, MAX_LOG_BYTES, ClosedLoop, DelayLine, Ring, diverged, sample, step, stop_status, take
+from .loop import MAX_LOG_BYTES, ClosedLoop, DelayLine, Ring, RK4Step
 from .outputs import outputs
 from .result import SimulationResult
 from .status import Status
@@ -31,61 +29,30 @@ from .status import Status
 Array = Any
 
 
-def _rk4(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int, max_state: float,
-         progress: bool, line: Ring | None) -> tuple[Array, Array, Status]:
-    """Fixed-step RK4 from t = 0 (:func:`~robotadapt.sim.loop.step` in a Python loop); returns logged (t, z) and the
-    status. The log at t_k holds the state applied over step k (with a delay line, x as read from it); the last sample,
-    at t_final, is logged, not integrated."""
-    from tqdm import tqdm
-
-    z_log = np.empty((n_steps // log_every + 1,) + z0.shape)
-    z, k_log, status = z0, 0, Status.ok()
-    quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
-    with tqdm(total=n_steps, delay=1.0, disable=quiet, unit="step", leave=False, file=sys.stderr) as bar, \
-            np.errstate(all="ignore"):
-        for start in range(0, n_steps, CHUNK):
-            m = min(CHUNK, n_steps - start)
-            ref = traj(dt * (start + 0.5 * np.arange(2 * m + 1)))
-            for j in range(m):
-                k, t = start + j, (start + j) * dt
-                try:
-                    s = step(loop, k, t, z, line, dt, take(ref, 2 * j), take(ref, 2 * j + 1), take(ref, 2 * j + 2))
-                except SimulationStop as stop:  # the law's assumptions failed (a guarded law, on numpy)
-                    status, s = Status.within(t, dt, str(stop)), None
-                if k % log_every == 0:
-                    z_log[k_log], k_log = z if s is None else s.applied, k_log + 1
-                if s is None:
-                    break
-                reason = diverged(loop.guarded_part(s.z), max_state)
-                if reason is not None:
-                    status = Status.at(t + dt, reason)
-                    break
-                z, line = s.z, s.line
-            bar.update(m)
-            if status != "ok":
-                break
-        else:
-            if n_steps % log_every == 0:  # the sample at t_final, logged, not integrated
-                z_log[k_log], k_log = z if line is None else sample(loop, n_steps, n_steps * dt, z, line,
-                                                                    take(ref, 2 * m))[0], k_log + 1
-    return dt * (log_every * np.arange(k_log)), z_log[:k_log], status
-
-
-def _rk4_compiled(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int,
-                  max_state: float, line: Ring | None) -> tuple[Array, Array, Status]:
-    """:func:`_rk4` compiled by JAX: the same logged samples and status."""
-    from .compiled import integrate
-
-    t, z, n_logged, t_bad, why, z_bad = integrate(loop, traj, z0, dt, n_steps, log_every, max_state, line)
-    return t[:n_logged], z[:n_logged], stop_status(loop, float(t_bad), int(why), max_state, z_bad, dt)
+def _fixed(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int, max_state: float,
+           progress: bool, line: DelayLine | None, backend: str) -> tuple[Array, Array, Status]:
+    """Fixed-step RK4 from t = 0 through the one driver (:class:`~robotadapt.sim.loop.RK4Step`); returns logged (t, z)
+    and the status. The log at t_k holds the state applied over step k (with a delay line, x as read from it); the last
+    sample, at t_final, is logged, not integrated."""
+    rk4 = RK4Step(loop, dt, max_state)
+    carry = (z0, None if line is None else Ring.start(line.buffer))
+    trace = drive([rk4], [carry], rk4.feed(traj), n_steps, log_every, backend=backend, progress=progress)
+    z = trace.records[:, 0]
+    return dt * (log_every * np.arange(len(z))), z, trace.status[0]
 
 
 def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
                max_state: float) -> tuple[Array, Array, Status]:
     from scipy.integrate import solve_ivp
 
+    class Refused(Exception):
+        """A guarded law's guard failed at a state solve_ivp asked for."""
+
     def fun(t: float, y: Array) -> Array:
-        return loop(t, y, traj(t))
+        dz, ok = loop.rate(t, y, traj(t))
+        if ok is not None and not ok:
+            raise Refused(loop.stop_reason(y))
+        return dz
 
     def runaway(t: float, y: Array) -> float:
         y = loop.guarded_part(y)
@@ -97,7 +64,7 @@ def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_
         with np.errstate(all="ignore"):
             sol = solve_ivp(fun, (0.0, t_eval[-1]), z0, method=opts.method, t_eval=t_eval, rtol=opts.rtol,
                             atol=opts.atol, events=runaway)
-    except SimulationStop as stop:  # solve_ivp keeps nothing: rerun to just before the stop is not worth it
+    except Refused as stop:  # solve_ivp keeps nothing: rerun to just before the stop is not worth it
         why = f"{stop} (solve_ivp keeps nothing of the run: use method = 'rk4' to keep the partial run)"
         return t_eval[:1], z0[None, :], Status.between(0.0, float(t_eval[-1]), why)
     t, z = sol.t, sol.y.T
@@ -110,10 +77,11 @@ def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_
     return t, z, Status.ok()
 
 
-def mujoco_sampling(plant: MujocoPlant, integrator: RK4 | SolveIVP | Sampled) -> Sampled:
-    """The sampled-data loop a MuJoCo plant runs in: the controller every control period of a `Sampled` integrator, or
-    at every step `dt` of a continuous-time `RK4` one (Euler updates of x); MuJoCo steps `plant.timestep` (default the
-    plant step of the integrator) between ticks. Host-side: backend "auto" is numpy, "jax" an error."""
+def host_sampling(plant: Plant, integrator: RK4 | SolveIVP | Sampled) -> Sampled:
+    """The sampled-data loop a plant stepped on the host by another engine (`stepped_on_host`: MuJoCo's) runs in: the
+    controller every control period of a `Sampled` integrator, or at every step `dt` of a continuous-time `RK4` one (Euler
+    updates of x); the engine steps `plant.timestep` (default the plant step of the integrator) between ticks.
+    Host-side: backend "auto" is numpy, "jax" an error."""
     if isinstance(integrator, SolveIVP):
         raise ConfigError("simulation.method", "a MuJoCo plant is stepped by MuJoCo: use method = 'rk4' (the controller "
                           "at every step) or a control_period")
@@ -121,10 +89,11 @@ def mujoco_sampling(plant: MujocoPlant, integrator: RK4 | SolveIVP | Sampled) ->
         raise ConfigError("simulation.backend", "a MuJoCo plant is stepped by MuJoCo on the host, not compiled by JAX: "
                           "use backend = 'numpy' or 'auto'")
     sampled = integrator if isinstance(integrator, Sampled) else Sampled(integrator.dt, integrator.dt)
-    if plant.timestep is None:
+    timestep = getattr(plant, "timestep", None)  # the host engine's own step, if it sets one
+    if timestep is None:
         return Sampled(sampled.control_period, sampled.dt, sampled.discretization, "numpy")
     try:
-        return Sampled(sampled.control_period, plant.timestep, sampled.discretization, "numpy")
+        return Sampled(sampled.control_period, timestep, sampled.discretization, "numpy")
     except ConfigError as exc:
         raise ConfigError("plant.timestep", exc.reason) from None
 
@@ -140,9 +109,10 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     :class:`RK4`, the state is logged every `log_every` steps; with :class:`SolveIVP` on its own output grid; with
     :class:`Sampled` every `log_every` control ticks. The run stops early, keeping its partial result, if the state
     becomes non-finite or exceeds `max_state`. The plant's sensor, rate limit and delay act at control ticks: they need
-    :class:`Sampled`. A MuJoCo plant (:class:`~robotadapt.plant.mujoco.MujocoPlant`) runs in the sampled-data loop
-    (:func:`mujoco_sampling`). The result's `info` records the plant's real-world effects and its model when it is not
-    the controller's (`plant`), and the sampling (`sampling`).
+    :class:`Sampled`. A plant stepped by another engine (`stepped_on_host`:
+    :class:`~robotadapt.plant.mujoco.MujocoPlant`) runs in the sampled-data loop (:func:`host_sampling`). The result's
+    `info` records the plant's real-world effects and its model when it is not the controller's (`plant`), and the
+    sampling (`sampling`).
 
     Examples
     --------
@@ -163,8 +133,8 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     if trajectory.n != n:
         raise ConfigError("trajectory", f"the trajectory has {trajectory.n} joints, the robot {n}")
     integrator = RK4() if integrator is None else integrator
-    if isinstance(plant, MujocoPlant):
-        integrator = mujoco_sampling(plant, integrator)
+    if plant.stepped_on_host:
+        integrator = host_sampling(plant, integrator)
     t_final = as_scalar(t_final, "simulation.t_final", positive=True)
     q0 = as_vector(0.0 if q0 is None else q0, n, "plant.q0")
     dq0 = as_vector(0.0 if dq0 is None else dq0, n, "plant.dq0")
@@ -226,9 +196,8 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
 
                 return integrate(loop, trajectory, z0, integrator, n_steps, log_every, max_state, progress, line,
                                  backend=backend)
-            step = _rk4_compiled if backend == "jax" else partial(_rk4, progress=progress)
-            return (*step(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state,
-                          line=None if line is None else Ring.start(line.buffer)), None)
+            return (*_fixed(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress, line,
+                            backend), None)
 
         if isinstance(integrator, Sampled):
             info["sampling"] = integrator.describe()

@@ -1,0 +1,395 @@
+"""The one driver (DESIGN "The engine"): every fixed-step run is a transition
+
+    carry_{k+1}, record_k, verdict_k = transition(carry_k, inputs_k),     k = 0 … n,
+
+a continuous RK4 step (:class:`robotadapt.sim.loop.RK4Step`) or a sampled-data tick (:class:`robotadapt.sim.sampled.Tick`),
+and :func:`drive` runs it, once for every mode: it feeds the inputs a chunk at a time, keeps every `log_every`-th record,
+stops each run where its verdict says (the divergence guard, a law's own guard) and builds each run's status. Step n
+(t_final) is recorded, not stepped. Under it two loops run the same transition and the same bookkeeping
+(:func:`_judge`): a Python loop (numpy: the readable reference, and plants stepped on the host such as MuJoCo's) and
+`lax.scan` under `jax.jit` (JAX, float64). The checkpointed form for gradients is :mod:`robotadapt.sim.gradient`.
+
+Runs: one transition stepping every run on leading run axes (`stacked`: a batch merged by
+:func:`robotadapt.sim.batch.stack`), or N transitions of one shape (`mapped`): numpy steps them one by one, JAX maps one
+program over them (`jax.vmap`; their float arrays, gains and true parameters, may differ). A stopped run's log repeats
+its last record; the others go on. Compiled programs are kept by the transition's skeleton
+(:func:`robotadapt.sim.compiled.skeleton`) in one bounded cache (`PROGRAMS`), and on disk.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, NamedTuple, Protocol
+
+import numpy as np
+
+from ..validation import ConfigError
+from .compiled import float64, jax_module, rebuild, skeleton
+from .status import Status
+
+Array = Any
+Feed = Callable[[int, int], Any]  # inputs of steps first … first + count − 1: a NamedTuple whose first field is `k`
+GUARD = 3  # the stop code of a law's own guard (HasGuard); 1 and 2 are the divergence guard's (loop.REASONS)
+CHUNK = 64  # steps fed to the Python loop at a time: one vectorized reference call for them, a small peak memory
+CHUNK_STEPS = 16384  # most steps per compiled call (the last call is padded)
+INPUT_BYTES = 64e6  # most bytes of inputs fed to one compiled call (all runs together)
+MAX_PROGRAMS = 16
+
+
+class Verdict(NamedTuple):
+    """How step k ended, per run (leading run axes, or none)."""
+
+    held: Array | None  # the step's record is valid; False: the run stops at step k, unrecorded (None: always valid)
+    why: Array  # 0: it goes on; else the stop code the transition words (Transition.status)
+    bad: Any  # what the transition words a guard's stop from (a pytree, run axes leading), or None
+
+
+class Transition(Protocol):
+    """One step of a fixed-step run (the module docstring), pure, in the array API of its inputs."""
+
+    @property
+    def loop(self) -> Any:
+        """The closed loop it steps (its law and plant name a program that cannot be traced)."""
+
+    def __call__(self, carry: Any, inputs: Any) -> tuple[Any, Any, Verdict]:
+        """(carry_{k+1}, record_k, verdict_k)."""
+
+    def compiled(self) -> Callable[[Any, Any], tuple[Any, Any, Verdict]]:
+        """The transition as a compiled program calls it (traced; e.g. the dynamics as a function of their own)."""
+
+    def program_key(self) -> Any:
+        """The transition without what only its feed reads (a sensor's seed): runs with equal keys share a program."""
+
+    def status(self, k: int, why: int, bad: Any) -> Status:
+        """The status of a run stopped at step k for the code `why` (`bad`: the verdict's, this run's)."""
+
+
+@dataclass(frozen=True)
+class Trace:
+    """What :func:`drive` returns: the logged records `(T, N, ...)` (a stopped run's rows after its stop repeat its last
+    one), each run's number of logged records `(N,)` and its status."""
+
+    records: Any
+    n_logged: Array
+    status: list[Status]
+
+
+def _map(fn: Callable[..., Any], tree: Any, *rest: Any) -> Any:
+    """`fn` over the arrays of nested tuples (the carries, records and inputs of the transitions; None stays None)."""
+    if tree is None:
+        return None
+    if isinstance(tree, tuple):
+        parts = [_map(fn, *leaves) for leaves in zip(tree, *rest, strict=True)]
+        return type(tree)(*parts) if hasattr(tree, "_fields") else tuple(parts)
+    return fn(tree, *rest)
+
+
+def _where(now: Array, new: Array, old: Array) -> Array:
+    """`new` where `now` (per run) else `old`, `now` broadcast over each leaf's trailing axes."""
+    xp = np if isinstance(now, np.ndarray | bool | np.bool_) else jax_module().numpy
+    now = xp.asarray(now)
+    return xp.where(now.reshape(now.shape + (1,) * (xp.ndim(new) - now.ndim)), new, old)
+
+
+def _xp(a: Any) -> Any:
+    return np if isinstance(a, np.ndarray | np.generic | bool | int) else jax_module().numpy
+
+
+def _judge(alive: Array, k: Any, n: int, verdict: Verdict) -> tuple[Array, Array, Array]:
+    """(the live runs that stop at step k, their stop code, whether step k's record is valid): a run stops at a failed
+    `held` (code GUARD, the step unrecorded) or, before step n, at a non-zero `why` (the step recorded). The one
+    bookkeeping of both loops."""
+    exists, active = k <= n, k < n
+    if verdict.held is None:
+        return alive & active & (verdict.why != 0), verdict.why, alive & exists
+    at_sample = alive & exists & ~verdict.held
+    after = alive & active & verdict.held & (verdict.why != 0)
+    return at_sample | after, _xp(verdict.why).where(at_sample, GUARD, verdict.why), alive & exists & verdict.held
+
+
+def _take(inputs: Any, i: int, mapped: Any) -> Any:
+    """Run i's inputs: its row (axis 1) of the leaves `mapped` marks as per run."""
+    if isinstance(mapped, tuple):
+        parts = [_take(a, i, m) for a, m in zip(inputs, mapped, strict=True)]
+        return type(inputs)(*parts) if hasattr(inputs, "_fields") else tuple(parts)
+    return _map(lambda a: a[:, i], inputs) if mapped else inputs
+
+
+def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, log_every: int,
+            progress: bool) -> tuple[Any, Array, Array, Array, Any]:
+    """The Python loop over steps: (the logged records `(T, ...)`, whether each is valid, the stop step, the stop code,
+    the verdicts' `bad`). `lanes`: one (transition, carry), a single run or the runs on its leading axes, or one per run
+    (mapped), stepped in lockstep so that each chunk of inputs is fed once."""
+    from tqdm import tqdm
+
+    one = len(lanes) == 1
+    shape = _runs_shape(lanes[0][1]) if one else (len(lanes),)
+    alive, k_stop, why = np.ones(shape, bool), np.zeros(shape, int), np.zeros(shape, int)
+    bad: list[Any] = [None] * len(lanes)
+    logs: list[Any] = [None] * len(lanes)
+    valid, T = np.zeros((n // log_every + 1,) + shape, bool), 0
+    carries = [carry for _, carry in lanes]
+    quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
+    with tqdm(total=n + 1, delay=1.0, disable=quiet, unit="step", leave=False, file=sys.stderr) as bar, \
+            np.errstate(all="ignore"):
+        for first in range(0, n + 1, CHUNK):
+            count = min(CHUNK, n + 1 - first)
+            xs = feed(first, count)
+            rows = [xs] if one else [_take(xs, i, mapped) for i in range(len(lanes))]
+            for j in range(count):
+                k = first + j
+                for i, (transition, _) in enumerate(lanes):
+                    lane = ... if one else i
+                    if not alive[lane].any():
+                        continue
+                    new, record, verdict = transition(carries[i], _map(lambda a: a[j], rows[i]))  # noqa: B023
+                    now, code, ok = _judge(alive[lane], k, n, verdict)
+                    if k % log_every == 0:  # into a log allocated once, at the first record
+                        if logs[i] is None:
+                            logs[i] = _map(lambda a: np.empty((len(valid),) + np.shape(a)), record)
+                        _map(lambda log, a: log.__setitem__(T, a), logs[i], record)  # noqa: B023
+                        valid[T, lane] = ok
+                    if np.any(now):
+                        k_stop[lane], why[lane] = np.where(now, k, k_stop[lane]), np.where(now, code, why[lane])
+                        bad[i] = verdict.bad if bad[i] is None else _map(
+                            lambda a, b: _where(now, a, b), verdict.bad, bad[i])  # noqa: B023
+                        alive[lane] = alive[lane] & ~now
+                    carries[i] = new
+                    del new, record, verdict  # the previous step's arrays are not held through the next one
+                T += k % log_every == 0
+                if not alive.any():
+                    break
+            bar.update(count)
+            if not alive.any():
+                break
+    if one:
+        return _map(lambda a: a[:T], logs[0]), valid[:T], k_stop, why, bad[0]
+    records = _map(lambda *a: np.stack([log[:T] for log in a], axis=1), *logs)
+    return records, valid[:T], k_stop, why, bad
+
+
+PROGRAMS: dict[Any, tuple[Any, Callable[..., Any]]] = {}  # compiled programs by (skeleton, log_every, mapping)
+
+
+def _program(transition: Any, log_every: int, mapped: Any) -> Callable[..., Any]:
+    """The jitted scan over blocks of `log_every` steps for transitions shaped like this one (`mapped`: vmapped over
+    runs, None: not). `run(arrays, state, xs, n)` scans the blocks of `xs` (`(blocks, log_every, ...)`), keeps each
+    block's first record and its validity, and computes no step after n (the padding of the last call). The entry
+    holds its template, so that ids in a key stay valid."""
+    key = (skeleton(transition.program_key(), []), log_every, mapped)
+    if key in PROGRAMS:
+        return PROGRAMS[key][1]
+    jax = jax_module()
+    jnp, lax = jax.numpy, jax.lax
+    template = rebuild(transition, iter(_leaves(transition)))
+
+    def run(arrays: list[Array], state: Any, xs: Any, n: Array) -> Any:
+        step = rebuild(template, iter(arrays)).compiled()
+
+        def block(state: Any, xs: Any) -> tuple[Any, Any]:
+            def one(i: Array, carried: Any) -> Any:
+                (carry, alive, k_stop, why, bad), kept = carried
+                inputs = _map(lambda a: a[i], xs)
+                new, record, verdict = step(carry, inputs)
+                k = inputs.k
+                now, code, ok = _judge(alive, k, n, verdict)
+                state = (new, alive & ~now, jnp.where(now, k, k_stop), jnp.where(now, code, why),
+                         None if bad is None else _map(lambda a, b: _where(now, a, b), verdict.bad, bad))
+                return state, _map(lambda a, b: jnp.where(i == 0, a, b), (record, ok), kept)
+
+            # the record's shape, from a copy of its own (a law's cached constants computed in this probe's trace must
+            # not be kept by the copy the steps trace)
+            probe = rebuild(template, iter(arrays)).compiled()
+            record = jax.eval_shape(lambda: probe(state[0], _map(lambda a: a[0], xs))[1])
+            blank = (_map(lambda s: jnp.zeros(s.shape, s.dtype), record), jnp.zeros_like(state[1]))
+            count = jnp.clip(n + 1 - xs.k[0], 0, xs.k.shape[0])  # the padding after step n: not computed
+            return lax.fori_loop(0, count, one, (state, blank))
+
+        return lax.scan(block, state, xs)
+
+    program = jax.jit(run if mapped is None else jax.vmap(run, in_axes=(0, 0, mapped, None)))
+    if len(PROGRAMS) >= MAX_PROGRAMS:
+        PROGRAMS.pop(next(iter(PROGRAMS)))
+    PROGRAMS[key] = (template, program)
+    return program
+
+
+def _leaves(transition: Any) -> list[Array]:
+    leaves: list[Array] = []
+    skeleton(transition, leaves)
+    return leaves
+
+
+def _axes(mapped: Any) -> Any:
+    """`jax.vmap`'s in_axes for the inputs of a call: shared leaves `(blocks, log_every, ...)`, per-run ones
+    `(N, blocks, log_every, ...)`."""
+    if isinstance(mapped, tuple):
+        parts = [_axes(m) for m in mapped]
+        return type(mapped)(*parts) if hasattr(mapped, "_fields") else tuple(parts)
+    return 0 if mapped else None
+
+
+@float64
+def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
+          mapped: Any) -> tuple[Any, Array, Array, Array, Any]:
+    """The compiled loop: :func:`_python`'s results, from `lax.scan` over blocks of steps (`mapped`: the runs'
+    transitions vmapped; None: one `transition`, on leading run axes or none). Tracing that meets code needing
+    concrete values (numpy-only code) is a ConfigError naming `simulation.backend` and the law."""
+    try:
+        return _compiled(runs, transition, carry, feed, n, log_every, mapped)
+    except ConfigError:
+        raise
+    except Exception as exc:  # tracing met code that needs concrete values
+        loop = runs[0].loop
+        name = f"{type(loop.controller).__name__} on {type(loop.plant.model).__name__}"
+        raise ConfigError("simulation.backend", f"{name} cannot be compiled with JAX ({type(exc).__name__}: "
+                          f"{(str(exc).splitlines() or [''])[0][:120]}); use backend = 'numpy'") from None
+
+
+def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
+              mapped: Any) -> tuple[Any, Array, Array, Array, Any]:
+    jax = jax_module()
+    jnp = jax.numpy
+    if mapped is not None:
+        key = skeleton(runs[0].program_key(), [])
+        for other in runs[1:]:
+            if skeleton(other.program_key(), []) != key:
+                raise ConfigError("simulation", "the runs differ in more than their arrays (a law's kind, a flag, a "
+                                  "scalar setting); one batch of sampled-data runs varies gains, tables and true "
+                                  "parameters only")
+        arrays = [jnp.asarray(np.stack(parts)) for parts in zip(*(_leaves(r) for r in runs), strict=True)]
+        shape: tuple[int, ...] = (len(runs),)
+        axes = _axes(mapped)
+    else:
+        arrays = [jnp.asarray(a) for a in _leaves(transition)]
+        shape, axes = _runs_shape(carry), None
+    program = _program(runs[0] if mapped is not None else transition, log_every, axes)
+    probe = feed(0, 1)
+    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe))
+    blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
+    most = max(1, int(min(CHUNK_STEPS, INPUT_BYTES // max(step_bytes, 1))) // log_every)
+    per_call = min(most, 1 << max(0, blocks - 1).bit_length())  # a power of two: fewer shapes, fewer compilations
+    one, one_carry = (transition, carry) if mapped is None else (runs[0], _map(lambda a: a[0], carry))
+    bad = _bad_template(one, one_carry, probe if mapped is None else _take(probe, 0, mapped), shape)
+    state = (_map(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad)
+    records, valid = [], []
+    for first in range(0, blocks, per_call):
+        size = per_call * log_every
+        real = min(size, n + 1 - first * log_every)
+        xs = _map(lambda a: np.concatenate([a, np.zeros((size - real,) + a.shape[1:], a.dtype)]),  # noqa: B023
+                  feed(first * log_every, real))  # the padding: zeros, with its step indices after n (not computed)
+        xs = xs._replace(k=np.arange(first * log_every, first * log_every + size))
+        xs = _blocked(xs, mapped, per_call, log_every)
+        state, (record, ok) = program(arrays, state, xs, n)
+        move = partial(_rows, keep=min(per_call, blocks - first), runs_first=mapped is not None)
+        records.append(_map(move, record))
+        valid.append(move(ok))
+        if not bool(np.asarray(state[1]).any()):
+            break
+    out = _map(lambda *a: np.concatenate(a), *records)
+    bad_out = None if state[4] is None else _map(np.asarray, state[4])
+    return out, np.concatenate(valid), np.asarray(state[2]), np.asarray(state[3]), bad_out
+
+
+def _rows(a: Array, keep: int, runs_first: bool) -> Array:
+    """A call's output `(blocks, ...)` (`(N, blocks, ...)` from a mapped program) as `(blocks, N, ...)`, the first
+    `keep` blocks."""
+    return (np.moveaxis(np.asarray(a), 0, 1) if runs_first else np.asarray(a))[:keep]
+
+
+def _blocked(xs: Any, mapped: Any, per_call: int, log_every: int) -> Any:
+    """The inputs of a call `(size, ...)` laid out as `(blocks, log_every, ...)`; per-run leaves (axis 1) with the runs
+    first."""
+    if isinstance(mapped, tuple):
+        parts = [_blocked(a, m, per_call, log_every) for a, m in zip(xs, mapped, strict=True)]
+        return type(xs)(*parts) if hasattr(xs, "_fields") else tuple(parts)
+
+    def layout(a: Array) -> Array:
+        if mapped:
+            a = np.moveaxis(a, 1, 0)
+            return a.reshape((a.shape[0], per_call, log_every) + a.shape[2:])
+        return a.reshape((per_call, log_every) + a.shape[1:])
+
+    return _map(layout, xs)
+
+
+def _flatten(tree: Any) -> list[Array]:
+    out: list[Array] = []
+    _map(out.append, tree)
+    return out
+
+
+def _runs_shape(carry: Any) -> tuple[int, ...]:
+    """The run axes of a stacked carry: those of its first leaf without its last axis (the state z `(..., d)`)."""
+    return tuple(np.shape(_flatten(carry)[0])[:-1])
+
+
+def _bad_template(transition: Any, carry: Any, probe: Any, shape: tuple[int, ...]) -> Any:
+    """Zeros shaped like one verdict's `bad` for the runs (None where the transition words no guard)."""
+    jax = jax_module()
+    copy = rebuild(transition, iter(_leaves(transition)))  # a law's cached constants land on the copy, not the run's
+    verdict = jax.eval_shape(lambda: copy.compiled()(_map(jax.numpy.asarray, carry),
+                                                     _map(lambda a: jax.numpy.asarray(a[0]), probe))[2])
+    if verdict.bad is None:
+        return None
+    lead = shape if not _runs_shape(carry) else ()
+    return _map(lambda s: jax.numpy.zeros(lead + s.shape, s.dtype), verdict.bad)
+
+
+def drive(runs: Sequence[Any], carries: Sequence[Any], feed: Feed, n: int, log_every: int, *, backend: str,
+          mapped: Any = None, stacked: tuple[Any, Any] | None = None, progress: bool = False) -> Trace:
+    """Steps 0 … n of every run, logged every `log_every` steps (module docstring).
+
+    `runs`: each run's transition (what words its status); `carries`: each run's carry before step 0. `stacked`: (one
+    transition, its carry) stepping all the runs at once on a leading run axis; else the runs are mapped. `feed(first,
+    count)`: the inputs of those steps for every run, leaves marked True in `mapped` (a prefix of the inputs' tuples)
+    holding the runs on axis 1, the others shared. `backend`: "numpy" (the Python loop) or "jax" (`lax.scan`)."""
+    N = len(runs)
+    listed = False
+    if stacked is not None or N == 1:
+        transition, carry = stacked if stacked is not None else (runs[0], carries[0])
+        one_feed = feed if stacked is not None else (lambda first, count: _take(feed(first, count), 0, mapped))
+        if backend == "jax":
+            out = _scan(runs, transition, carry, one_feed, n, log_every, None)
+        else:
+            out = _python([(transition, carry)], one_feed, None, n, log_every, progress)
+        records, valid, k_stop, why, bad = out
+        if stacked is None:  # a single run: a run axis of one
+            records, valid = _map(lambda a: a[:, None], records), valid[:, None]
+            k_stop, why, bad = k_stop[None], why[None], _map(lambda a: a[None], bad)
+    elif backend == "jax":
+        records, valid, k_stop, why, bad = _scan(runs, None, _map(lambda *a: np.stack(a), *carries), feed, n,
+                                                 log_every, mapped)
+    else:
+        records, valid, k_stop, why, bad = _python(list(zip(runs, carries, strict=True)), feed, mapped, n, log_every,
+                                                   progress)
+        listed = True
+    return _trace(runs, records, valid, k_stop, why, bad, listed)
+
+
+def _trace(runs: Sequence[Any], records: Any, valid: Array, k_stop: Array, why: Array, bad: Any,
+           listed: bool) -> Trace:
+    """The records thinned to each run's valid rows (the rows after a stop repeat the last valid one) and the statuses,
+    built here once."""
+    n_logged = valid.sum(axis=0)
+    T = int(n_logged.max()) if n_logged.size else 0
+
+    def fill(a: Array) -> Array:
+        a = a[:T] if a.flags.writeable else np.array(a[:T])  # the Python loop's own log: filled in place
+        if not T:
+            return a
+        for i, k in enumerate(n_logged):
+            a[k:, i] = a[max(k - 1, 0), i]
+        return a
+
+    status = []
+    for i, run in enumerate(runs):
+        if why[i] == 0:
+            status.append(Status.ok())
+            continue
+        one = (bad[i] if listed else _map(lambda a: a[i], bad)) if bad is not None else None  # noqa: B023
+        status.append(run.status(int(k_stop[i]), int(why[i]), one))
+    return Trace(_map(fill, records), n_logged, status)
