@@ -50,7 +50,7 @@ def _cases(model: RobotModel, traj) -> dict[str, Callable[[int], object]]:  # ty
     dcal_table = DCAL(model, Kv=50, Kp=50, Ka=50, Gamma=20, phi_hat0=phi, precompute=True).prepare(traj, 2 * DT, t[-1])
     rcl = Repetitive(model, Kv=50, Kp=50, Ka=50, kL=50).prepare(traj, DT, t[-1])
     line = rcl.delay_line(DT, q[0], dq[0])
-    x_rcl = np.zeros(n)
+    x_rcl = rcl.initial_state(q[0], dq[0])  # its state: û_d, the integrals of its monitor (7.2.43)
 
     def repetitive(k: int) -> object:
         held, store = rcl.sample(t[k], x_rcl, q[k], dq[k], refs[k], line[k % line.shape[0]])

@@ -122,7 +122,7 @@ SCENARIOS = sorted(p.name[: -len(".toml")] for p in resources.files("robotadapt.
 def _skip_reason(name: str) -> str | None:
     data = tomllib.loads((resources.files("robotadapt.studies.scenarios") / f"{name}.toml").read_text("utf-8"))
     if "control_period" in data.get("simulation", {}):
-        return "sampled-data control: compiled by its own engine (tests/test_sampled.py)"
+        return "sampled-data control: its ticks are compared across the backends in tests/test_sampled.py"
     if data["robot"]["kind"] in ("urdf", "example_robot"):
         return ("a URDF arm: its numpy reference is Pinocchio's model, compared with the compiled KinematicTree in "
                 "tests/test_kinematic_tree.py")

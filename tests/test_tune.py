@@ -43,7 +43,7 @@ def test_the_differentiable_run_is_the_compiled_forward_run(name):
         else s.controller
     loop = ClosedLoop(s.plant, ctrl, s.plant.model.n)
     z0 = np.concatenate([s.plant.initial_state(s.q0, s.dq0), ctrl.initial_state(s.q0, s.dq0)])
-    t, e, tau, _ = Rollout.make(s.trajectory, s.integrator.dt, s.t_final, s.log_every).signals(loop, s.trajectory, z0)
+    t, e, tau, _ = Rollout.make(loop, s.trajectory, s.integrator, s.t_final, s.log_every).signals(loop, s.trajectory, z0)
     np.testing.assert_array_equal(t, reference.t)
     np.testing.assert_allclose(np.asarray(e), reference.e, rtol=0, atol=1e-9)
     np.testing.assert_allclose(np.asarray(tau), reference.tau, rtol=1e-9, atol=1e-9)
@@ -198,10 +198,8 @@ SAMPLED = ["simulation.t_final=0.6", "simulation.backend='jax'", "simulation.con
 
 
 def test_the_differentiable_sampled_run_is_the_compiled_forward_run():
-    """Example 6.3.1 at 250 Hz with a noisy encoder: the scanned tick (SampledRollout) gives the errors and the held
-    torques of the compiled sampled-data run, to 1e-9, its noise drawn from the same seed."""
-    from robotadapt.plant.sensors import Sensor
-    from robotadapt.sim.gradient import SampledRollout
+    """Example 6.3.1 at 250 Hz with a noisy encoder: the scanned tick (Rollout of the Tick) gives the errors and the
+    held torques of the compiled sampled-data run, to 1e-9, its noise drawn from the same seed."""
 
     scenario = load("example-6.3.1", SAMPLED)
     s = scenario.setup
@@ -209,7 +207,7 @@ def test_the_differentiable_sampled_run_is_the_compiled_forward_run():
     loop = ClosedLoop(s.plant, s.controller, 2)
     q_m, dq_m = s.plant.sensor.first_measurement(s.q0, s.dq0, 0.004)
     z0 = np.concatenate([s.plant.initial_state(s.q0, s.dq0), s.controller.initial_state(q_m, dq_m)])
-    rollout = SampledRollout.make(s.trajectory, s.integrator, s.t_final, s.log_every, s.plant.sensor or Sensor(2))
+    rollout = Rollout.make(loop, s.trajectory, s.integrator, s.t_final, s.log_every)
     t, e, tau, _ = rollout.signals(loop, s.trajectory, z0)
     np.testing.assert_allclose(t, reference.t, rtol=1e-15)
     np.testing.assert_allclose(np.asarray(e), reference.e, rtol=0, atol=1e-9)

@@ -315,9 +315,9 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
 
 def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, max_state: float, progress: bool,
                    info: dict[str, Any]) -> BatchResult:
-    """:func:`simulate_batch` of sampled-data runs: the runs' ticks compiled into one program mapped over the runs
-    (:func:`robotadapt.sim.sampled.integrate_batch`), or stepped one by one by numpy; the runs must share one
-    program's shape (they differ in arrays: gains, tables, true parameters), else NotBatchable."""
+    """:func:`simulate_batch` of sampled-data runs (:func:`robotadapt.sim.sampled.integrate_batch`): the runs' ticks
+    compiled into one program mapped over the runs, or stepped in lockstep by numpy; the runs must share one program's
+    shape (they differ in arrays: gains, tables, true parameters), else NotBatchable."""
     from .sampled import integrate_batch
     from .simulation import host_sampling
 

@@ -77,12 +77,12 @@ class Trace:
     status: list[Status]
 
 
-def _map(fn: Callable[..., Any], tree: Any, *rest: Any) -> Any:
+def map_tree(fn: Callable[..., Any], tree: Any, *rest: Any) -> Any:
     """`fn` over the arrays of nested tuples (the carries, records and inputs of the transitions; None stays None)."""
     if tree is None:
         return None
     if isinstance(tree, tuple):
-        parts = [_map(fn, *leaves) for leaves in zip(tree, *rest, strict=True)]
+        parts = [map_tree(fn, *leaves) for leaves in zip(tree, *rest, strict=True)]
         return type(tree)(*parts) if hasattr(tree, "_fields") else tuple(parts)
     return fn(tree, *rest)
 
@@ -110,12 +110,12 @@ def _judge(alive: Array, k: Any, n: int, verdict: Verdict) -> tuple[Array, Array
     return at_sample | after, _xp(verdict.why).where(at_sample, GUARD, verdict.why), alive & exists & verdict.held
 
 
-def _take(inputs: Any, i: int, mapped: Any) -> Any:
+def take_run(inputs: Any, i: int, mapped: Any) -> Any:
     """Run i's inputs: its row (axis 1) of the leaves `mapped` marks as per run."""
     if isinstance(mapped, tuple):
-        parts = [_take(a, i, m) for a, m in zip(inputs, mapped, strict=True)]
+        parts = [take_run(a, i, m) for a, m in zip(inputs, mapped, strict=True)]
         return type(inputs)(*parts) if hasattr(inputs, "_fields") else tuple(parts)
-    return _map(lambda a: a[:, i], inputs) if mapped else inputs
+    return map_tree(lambda a: a[:, i], inputs) if mapped else inputs
 
 
 def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, log_every: int,
@@ -138,23 +138,23 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
         for first in range(0, n + 1, CHUNK):
             count = min(CHUNK, n + 1 - first)
             xs = feed(first, count)
-            rows = [xs] if one else [_take(xs, i, mapped) for i in range(len(lanes))]
+            rows = [xs] if one else [take_run(xs, i, mapped) for i in range(len(lanes))]
             for j in range(count):
                 k = first + j
                 for i, (transition, _) in enumerate(lanes):
                     lane = ... if one else i
                     if not alive[lane].any():
                         continue
-                    new, record, verdict = transition(carries[i], _map(lambda a: a[j], rows[i]))  # noqa: B023
+                    new, record, verdict = transition(carries[i], map_tree(lambda a: a[j], rows[i]))  # noqa: B023
                     now, code, ok = _judge(alive[lane], k, n, verdict)
                     if k % log_every == 0:  # into a log allocated once, at the first record
                         if logs[i] is None:
-                            logs[i] = _map(lambda a: np.empty((len(valid),) + np.shape(a)), record)
-                        _map(lambda log, a: log.__setitem__(T, a), logs[i], record)  # noqa: B023
+                            logs[i] = map_tree(lambda a: np.empty((len(valid),) + np.shape(a)), record)
+                        map_tree(lambda log, a: log.__setitem__(T, a), logs[i], record)  # noqa: B023
                         valid[T, lane] = ok
                     if np.any(now):
                         k_stop[lane], why[lane] = np.where(now, k, k_stop[lane]), np.where(now, code, why[lane])
-                        bad[i] = verdict.bad if bad[i] is None else _map(
+                        bad[i] = verdict.bad if bad[i] is None else map_tree(
                             lambda a, b: _where(now, a, b), verdict.bad, bad[i])  # noqa: B023
                         alive[lane] = alive[lane] & ~now
                     carries[i] = new
@@ -166,55 +166,52 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
             if not alive.any():
                 break
     if one:
-        return _map(lambda a: a[:T], logs[0]), valid[:T], k_stop, why, bad[0]
-    records = _map(lambda *a: np.stack([log[:T] for log in a], axis=1), *logs)
+        return map_tree(lambda a: a[:T], logs[0]), valid[:T], k_stop, why, bad[0]
+    records = map_tree(lambda *a: np.stack([log[:T] for log in a], axis=1), *logs)
     return records, valid[:T], k_stop, why, bad
 
 
-PROGRAMS: dict[Any, tuple[Any, Callable[..., Any]]] = {}  # compiled programs by (skeleton, log_every, mapping)
+PROGRAMS: dict[Any, tuple[Any, Callable[..., Any], dict[Any, Any]]] = {}  # by (skeleton, log_every, mapping)
 
 
-def _program(transition: Any, log_every: int, mapped: Any) -> Callable[..., Any]:
+def _program(transition: Any, log_every: int, mapped: Any) -> tuple[Callable[..., Any], dict[Any, Any]]:
     """The jitted scan over blocks of `log_every` steps for transitions shaped like this one (`mapped`: vmapped over
-    runs, None: not). `run(arrays, state, xs, n)` scans the blocks of `xs` (`(blocks, log_every, ...)`), keeps each
-    block's first record and its validity, and computes no step after n (the padding of the last call). The entry
-    holds its template, so that ids in a key stay valid."""
+    runs, None: not), and the entry's memo of verdict shapes (:func:`_bad_shapes`). `run(arrays, state, xs, n)` scans
+    the blocks of `xs` (`(blocks, log_every, ...)`), keeps each block's first record and its validity, and computes no
+    step after n (the padding of the last call). The entry holds its template, so that ids in a key stay valid."""
     key = (skeleton(transition.program_key(), []), log_every, mapped)
     if key in PROGRAMS:
-        return PROGRAMS[key][1]
+        return PROGRAMS[key][1], PROGRAMS[key][2]
     jax = jax_module()
     jnp, lax = jax.numpy, jax.lax
     template = rebuild(transition, iter(_leaves(transition)))
 
     def run(arrays: list[Array], state: Any, xs: Any, n: Array) -> Any:
-        step = rebuild(template, iter(arrays)).compiled()
-
         def block(state: Any, xs: Any) -> tuple[Any, Any]:
-            def one(i: Array, carried: Any) -> Any:
-                (carry, alive, k_stop, why, bad), kept = carried
-                inputs = _map(lambda a: a[i], xs)
-                new, record, verdict = step(carry, inputs)
-                k = inputs.k
-                now, code, ok = _judge(alive, k, n, verdict)
-                state = (new, alive & ~now, jnp.where(now, k, k_stop), jnp.where(now, code, why),
-                         None if bad is None else _map(lambda a, b: _where(now, a, b), verdict.bad, bad))
-                return state, _map(lambda a, b: jnp.where(i == 0, a, b), (record, ok), kept)
+            """The block's steps that exist (none of the padding after step n); the first one's record is kept."""
+            step = rebuild(template, iter(arrays)).compiled()  # a copy per trace: a law's cached constants stay in it
 
-            # the record's shape, from a copy of its own (a law's cached constants computed in this probe's trace must
-            # not be kept by the copy the steps trace)
-            probe = rebuild(template, iter(arrays)).compiled()
-            record = jax.eval_shape(lambda: probe(state[0], _map(lambda a: a[0], xs))[1])
-            blank = (_map(lambda s: jnp.zeros(s.shape, s.dtype), record), jnp.zeros_like(state[1]))
+            def one(state: Any, inputs: Any) -> tuple[Any, Any]:
+                carry, alive, k_stop, why, bad = state
+                new, record, verdict = step(carry, inputs)
+                now, code, ok = _judge(alive, inputs.k, n, verdict)
+                state = (new, alive & ~now, jnp.where(now, inputs.k, k_stop), jnp.where(now, code, why),
+                         None if bad is None else map_tree(lambda a, b: _where(now, a, b), verdict.bad, bad))
+                return state, (record, ok)
+
             count = jnp.clip(n + 1 - xs.k[0], 0, xs.k.shape[0])  # the padding after step n: not computed
-            return lax.fori_loop(0, count, one, (state, blank))
+            state, out = one(state, map_tree(lambda a: a[0], xs))  # past n (padding): judged as nothing, unrecorded
+            if xs.k.shape[0] > 1:  # (a block of one step, log_every = 1, has no loop)
+                state = lax.fori_loop(1, count, lambda i, state: one(state, map_tree(lambda a: a[i], xs))[0], state)
+            return state, out
 
         return lax.scan(block, state, xs)
 
     program = jax.jit(run if mapped is None else jax.vmap(run, in_axes=(0, 0, mapped, None)))
     if len(PROGRAMS) >= MAX_PROGRAMS:
         PROGRAMS.pop(next(iter(PROGRAMS)))
-    PROGRAMS[key] = (template, program)
-    return program
+    PROGRAMS[key] = (template, program, {})
+    return program, PROGRAMS[key][2]
 
 
 def _leaves(transition: Any) -> list[Array]:
@@ -266,31 +263,34 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     else:
         arrays = [jnp.asarray(a) for a in _leaves(transition)]
         shape, axes = _runs_shape(carry), None
-    program = _program(runs[0] if mapped is not None else transition, log_every, axes)
+    program, shapes = _program(runs[0] if mapped is not None else transition, log_every, axes)
     probe = feed(0, 1)
     step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe))
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
     most = max(1, int(min(CHUNK_STEPS, INPUT_BYTES // max(step_bytes, 1))) // log_every)
     per_call = min(most, 1 << max(0, blocks - 1).bit_length())  # a power of two: fewer shapes, fewer compilations
-    one, one_carry = (transition, carry) if mapped is None else (runs[0], _map(lambda a: a[0], carry))
-    bad = _bad_template(one, one_carry, probe if mapped is None else _take(probe, 0, mapped), shape)
-    state = (_map(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad)
+    one, one_carry = (transition, carry) if mapped is None else (runs[0], map_tree(lambda a: a[0], carry))
+    known = tuple(np.shape(a) for a in _flatten(one_carry)), shape
+    if known not in shapes:  # the verdict's shapes: one trace of the step per program and shape, not one per run
+        shapes[known] = _bad_shapes(one, one_carry, probe if mapped is None else take_run(probe, 0, mapped), shape)
+    bad = map_tree(lambda s: jnp.zeros(s.shape, s.dtype), shapes[known])
+    state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad)
     records, valid = [], []
     for first in range(0, blocks, per_call):
         size = per_call * log_every
         real = min(size, n + 1 - first * log_every)
-        xs = _map(lambda a: np.concatenate([a, np.zeros((size - real,) + a.shape[1:], a.dtype)]),  # noqa: B023
+        xs = map_tree(lambda a: np.concatenate([a, np.zeros((size - real,) + a.shape[1:], a.dtype)]),  # noqa: B023
                   feed(first * log_every, real))  # the padding: zeros, with its step indices after n (not computed)
         xs = xs._replace(k=np.arange(first * log_every, first * log_every + size))
         xs = _blocked(xs, mapped, per_call, log_every)
         state, (record, ok) = program(arrays, state, xs, n)
         move = partial(_rows, keep=min(per_call, blocks - first), runs_first=mapped is not None)
-        records.append(_map(move, record))
+        records.append(map_tree(move, record))
         valid.append(move(ok))
         if not bool(np.asarray(state[1]).any()):
             break
-    out = _map(lambda *a: np.concatenate(a), *records)
-    bad_out = None if state[4] is None else _map(np.asarray, state[4])
+    out = map_tree(lambda *a: np.concatenate(a), *records)
+    bad_out = None if state[4] is None else map_tree(np.asarray, state[4])
     return out, np.concatenate(valid), np.asarray(state[2]), np.asarray(state[3]), bad_out
 
 
@@ -313,12 +313,12 @@ def _blocked(xs: Any, mapped: Any, per_call: int, log_every: int) -> Any:
             return a.reshape((a.shape[0], per_call, log_every) + a.shape[2:])
         return a.reshape((per_call, log_every) + a.shape[1:])
 
-    return _map(layout, xs)
+    return map_tree(layout, xs)
 
 
 def _flatten(tree: Any) -> list[Array]:
     out: list[Array] = []
-    _map(out.append, tree)
+    map_tree(out.append, tree)
     return out
 
 
@@ -327,16 +327,16 @@ def _runs_shape(carry: Any) -> tuple[int, ...]:
     return tuple(np.shape(_flatten(carry)[0])[:-1])
 
 
-def _bad_template(transition: Any, carry: Any, probe: Any, shape: tuple[int, ...]) -> Any:
-    """Zeros shaped like one verdict's `bad` for the runs (None where the transition words no guard)."""
+def _bad_shapes(transition: Any, carry: Any, probe: Any, shape: tuple[int, ...]) -> Any:
+    """The shapes of one verdict's `bad` for the runs (None where the transition words no guard)."""
     jax = jax_module()
     copy = rebuild(transition, iter(_leaves(transition)))  # a law's cached constants land on the copy, not the run's
-    verdict = jax.eval_shape(lambda: copy.compiled()(_map(jax.numpy.asarray, carry),
-                                                     _map(lambda a: jax.numpy.asarray(a[0]), probe))[2])
+    verdict = jax.eval_shape(lambda: copy.compiled()(map_tree(jax.numpy.asarray, carry),
+                                                     map_tree(lambda a: jax.numpy.asarray(a[0]), probe))[2])
     if verdict.bad is None:
         return None
     lead = shape if not _runs_shape(carry) else ()
-    return _map(lambda s: jax.numpy.zeros(lead + s.shape, s.dtype), verdict.bad)
+    return map_tree(lambda s: jax.ShapeDtypeStruct(lead + s.shape, s.dtype), verdict.bad)
 
 
 def drive(runs: Sequence[Any], carries: Sequence[Any], feed: Feed, n: int, log_every: int, *, backend: str,
@@ -351,17 +351,17 @@ def drive(runs: Sequence[Any], carries: Sequence[Any], feed: Feed, n: int, log_e
     listed = False
     if stacked is not None or N == 1:
         transition, carry = stacked if stacked is not None else (runs[0], carries[0])
-        one_feed = feed if stacked is not None else (lambda first, count: _take(feed(first, count), 0, mapped))
+        one_feed = feed if stacked is not None else (lambda first, count: take_run(feed(first, count), 0, mapped))
         if backend == "jax":
             out = _scan(runs, transition, carry, one_feed, n, log_every, None)
         else:
             out = _python([(transition, carry)], one_feed, None, n, log_every, progress)
         records, valid, k_stop, why, bad = out
         if stacked is None:  # a single run: a run axis of one
-            records, valid = _map(lambda a: a[:, None], records), valid[:, None]
-            k_stop, why, bad = k_stop[None], why[None], _map(lambda a: a[None], bad)
+            records, valid = map_tree(lambda a: a[:, None], records), valid[:, None]
+            k_stop, why, bad = k_stop[None], why[None], map_tree(lambda a: a[None], bad)
     elif backend == "jax":
-        records, valid, k_stop, why, bad = _scan(runs, None, _map(lambda *a: np.stack(a), *carries), feed, n,
+        records, valid, k_stop, why, bad = _scan(runs, None, map_tree(lambda *a: np.stack(a), *carries), feed, n,
                                                  log_every, mapped)
     else:
         records, valid, k_stop, why, bad = _python(list(zip(runs, carries, strict=True)), feed, mapped, n, log_every,
@@ -390,6 +390,6 @@ def _trace(runs: Sequence[Any], records: Any, valid: Array, k_stop: Array, why: 
         if why[i] == 0:
             status.append(Status.ok())
             continue
-        one = (bad[i] if listed else _map(lambda a: a[i], bad)) if bad is not None else None  # noqa: B023
+        one = (bad[i] if listed else map_tree(lambda a: a[i], bad)) if bad is not None else None  # noqa: B023
         status.append(run.status(int(k_stop[i]), int(why[i]), one))
-    return Trace(_map(fill, records), n_logged, status)
+    return Trace(map_tree(fill, records), n_logged, status)

@@ -131,14 +131,16 @@ class Tick:
         object.__setattr__(self, "projects", isinstance(self.loop.controller, HasProjection))
         object.__setattr__(self, "filters", isinstance(self.loop.controller, FiltersTorque))
 
-    def start(self, z0: Array, line: Array | None) -> Carry:
+    def start(self, z0: Array, line: Array | None = None) -> Carry:
         """The carry before tick 0: z0 = [s0, x0, w0] (ClosedLoop.start) and the delay line's initial contents (None: no
         line)."""
         n, m, Ts = self.loop.n, self.loop.m, self.opts.control_period
-        s, x = np.asarray(z0[:m], dtype=float), np.asarray(z0[m : len(z0) - self.loop.w], dtype=float)
+        xp = array_namespace(z0)
+        s, x = z0[:m], z0[m : z0.shape[0] - self.loop.w]
         buffer = np.zeros(0) if line is None else np.array(line, dtype=float)
-        return Carry(s, x, self.sensor.start(s[:n], s[n : 2 * n], Ts), self.actuator.start(), buffer,
-                     np.zeros(self.loop.w))
+        actuator = tuple(xp.asarray(a) for a in self.actuator.start())
+        return Carry(s, x, self.sensor.start(s[:n], s[n : 2 * n], Ts), actuator, xp.asarray(buffer),
+                     xp.zeros(self.loop.w))
 
     def __call__(self, carry: Carry, inputs: Any, dynamics: Dynamics | None = None) -> tuple[Carry, Record, Verdict]:
         """(carry_{k+1}, record_k, verdict_k): steps 1–7 of the module docstring; `dynamics` the plant's ds/dt
@@ -263,6 +265,10 @@ class Tick:
             q_bad, x_bad = bad  # type: ignore[misc]
             return Status.at(t, str(self.loop.controller.stop_reason(np.asarray(q_bad), np.asarray(x_bad))))
         return Status.at(t + self.opts.control_period, REASONS[why].format(max_state=self.max_state))
+
+    def signals(self, records: Record, t: Array, ref: Reference) -> tuple[Array, Array]:
+        """(z, the applied torque) at the logged ticks, from their records."""
+        return records.z, records.tau
 
     def logged(self, records: Record) -> dict[str, Array]:
         """The result's signals from the stacked records: `tau` (applied), and `tau_commanded` with an actuator,

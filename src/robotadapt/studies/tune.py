@@ -28,9 +28,8 @@ import numpy as np
 from ..analysis.metrics import OBJECTIVES, metrics, objective_terms
 from ..controllers.base import Prepares
 from ..plant.mujoco import MujocoPlant
-from ..plant.sensors import Sensor
 from ..sim.compiled import float64, jax_module
-from ..sim.gradient import Rollout, SampledRollout, check_differentiable, replace_at
+from ..sim.gradient import Rollout, check_differentiable, replace_at
 from ..sim.integrators import RK4, Sampled
 from ..sim.loop import ClosedLoop
 from ..validation import ConfigError
@@ -87,15 +86,10 @@ class Problem:
         self.loop = closed_loop(scenario)
         ctrl = self.loop.controller
         self.gains, self.objective, self.max_torque = gains, objective, max_torque
-        self.rollout: Rollout | SampledRollout
-        if isinstance(s.integrator, Sampled):
-            self.rollout = SampledRollout.make(s.trajectory, s.integrator, s.t_final, s.log_every,
-                                               s.plant.sensor or Sensor(s.plant.model.n))
-            seen = (s.q0, s.dq0) if s.plant.sensor is None else s.plant.sensor.first_measurement(
-                s.q0, s.dq0, s.integrator.control_period)
-        else:
-            self.rollout = Rollout.make(s.trajectory, s.integrator.dt, s.t_final, s.log_every)
-            seen = (s.q0, s.dq0)
+        self.rollout = Rollout.make(self.loop, s.trajectory, s.integrator, s.t_final, s.log_every)
+        seen = (s.q0, s.dq0)
+        if isinstance(s.integrator, Sampled) and s.plant.sensor is not None:  # what the law measures first
+            seen = s.plant.sensor.first_measurement(s.q0, s.dq0, s.integrator.control_period)
         self.x0 = ctrl.initial_state(*seen)
         self.s0 = s.plant.initial_state(s.q0, s.dq0)
         self.trajectory, self.max_state = s.trajectory, s.max_state
