@@ -5,7 +5,10 @@ BIN     := $(VENV)/bin
 PIP     := $(BIN)/python -m pip
 STAMP   := $(VENV)/.stamp
 
-.PHONY: demo test test-all bench docs clean
+.PHONY: demo test test-all bench docs clean system-packages
+
+# SYSTEM_PACKAGES=0: install nothing outside .venv (the browser and video tests then skip, each saying why)
+SYSTEM_PACKAGES ?= 1
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -22,14 +25,21 @@ $(VENV)/.dev: $(BIN)/python pyproject.toml
 demo: $(VENV)/.core                ## set up and run the flagship example (Example 6.3.1) into results/
 	$(BIN)/robotadapt run example-6.3.1 --out results/example-6.3.1
 
-test: $(VENV)/.dev                 ## set up and run the fast test suite
-	@command -v chromium >/dev/null 2>&1 || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
-	  chromium >/dev/null) || echo "chromium not installable here: tests/test_report.py skips the browser test"
-	@ldconfig -p 2>/dev/null | grep -q libOSMesa || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install \
-	  -y -qq libosmesa6 >/dev/null) || echo "libosmesa6 not installable here: --video fails, its test in tests/test_mujoco.py skips"
+test: $(VENV)/.dev system-packages ## set up and run the fast test suite
 	$(BIN)/ruff check src tests benchmarks docs
 	$(BIN)/mypy
 	$(BIN)/python -m pytest -q -n 2 -m "not slow"
+
+system-packages:                   ## the two system packages some tests use, with apt-get, where missing (SYSTEM_PACKAGES=0 skips)
+	@if [ "$(SYSTEM_PACKAGES)" = 0 ]; then echo "system packages: skipped (SYSTEM_PACKAGES=0); the browser and video tests skip"; \
+	else \
+	  command -v chromium >/dev/null 2>&1 || { echo "system packages: apt-get install chromium (headless browser for the docs' \
+	and report's tests; skip with SYSTEM_PACKAGES=0)"; (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install \
+	  -y -qq chromium >/dev/null) || echo "chromium not installable here: the browser tests skip"; }; \
+	  ldconfig -p 2>/dev/null | grep -q libOSMesa || { echo "system packages: apt-get install libosmesa6 (off-screen OpenGL for \
+	--video; skip with SYSTEM_PACKAGES=0)"; (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+	  libosmesa6 >/dev/null) || echo "libosmesa6 not installable here: --video fails, its test skips"; }; \
+	fi
 
 test-all: $(VENV)/.dev             ## every test, the slow studies included
 	$(BIN)/python -m pytest -q -n 2

@@ -276,3 +276,14 @@ def test_progress_bars_only_on_a_terminal(tmp_path):
     done = subprocess.run([sys.executable, "-m", "robotadapt", "run", "example-6.3.1", "--backend", "numpy", "--t-final",
                            "4", "--no-plots", "--out", str(tmp_path)], capture_output=True, text=True, check=True)
     assert done.stderr == ""
+
+
+def test_bare_robotadapt_lists_every_command_and_exits_0(capsys):
+    """A newcomer's first call: the commands with their one-line help and where to start, not a usage error."""
+    from robotadapt.cli import COMMANDS
+
+    assert main([]) == 0
+    out = capsys.readouterr().out
+    for name in COMMANDS:
+        assert f"\n    {name} " in out, name
+    assert "robotadapt list" in out

@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from robotadapt.analysis.metrics import metrics
 from robotadapt.cli import main
 from robotadapt.sim.compiled import jax_module
 from robotadapt.sim.gradient import Rollout, replace_at
@@ -111,9 +112,14 @@ def test_tune_writes_files_and_run_reproduces_the_objective(tmp_path, capsys):
                  "--max-torque", "150", "--max-runs", "10", "--surface", "3", "--out", str(out)])
     assert code == 0, capsys.readouterr()
     summary = json.loads((out / "tune.json").read_text())
+    printed = capsys.readouterr().out
     assert (out / "tune.png").stat().st_size > 0
     assert set(summary) >= {"objective", "max_abs_torque", "gains", "iterations", "wall_time"}
     assert summary["runs"] <= 10 + 2 and summary["max_abs_torque"] <= 150  # + the start and the answer, scored
+    # one count everywhere: --max-runs bounds the differentiated runs, which the line and the figure name as such
+    assert summary["differentiated_runs"] <= 10 and summary["forward_runs"] == 2
+    assert summary["runs"] == summary["differentiated_runs"] + summary["forward_runs"]
+    assert f"in {summary['differentiated_runs']} differentiated runs (+ 2 forward runs" in printed
     assert all({"objective", "max_abs_torque", "gradient_norm"} <= set(it) for it in summary["iterations"])
     assert summary["initial"]["max_abs_torque"] > 150 and summary["feasible"]
     assert main(["run", str(out / "tuned.toml"), "--out", str(tmp_path / "run"), "--no-plots"]) == 0
@@ -131,8 +137,17 @@ def test_a_budget_no_gains_meet_keeps_the_best_and_exits_1(tmp_path, capsys):
     code = main(["tune", "example-6.3.1", "--t-final", "0.5", "--vary", "controller.Kv", "--max-torque", "1",
                  "--max-runs", "4", "--out", str(out), "--no-plots"])
     assert code == 1
-    assert "no gains found meet the budget" in capsys.readouterr().out
-    assert (out / "tuned.toml").exists() and json.loads((out / "tune.json").read_text())["feasible"] is False
+    printed = capsys.readouterr().out
+    assert "no gains found meet the budget" in printed
+    summary = json.loads((out / "tune.json").read_text())
+    assert (out / "tuned.toml").exists() and summary["feasible"] is False
+    # the hint: the gain that moves the peak, its elasticity against forward runs at Kv·(1 ± 5 %) of the answer
+    kv = summary["gains"]["controller.Kv"]
+    elasticity = summary["peak_elasticity"]["controller.Kv"]
+    assert "the peak moves most with controller.Kv" in printed and ("lower" if elasticity > 0 else "raise") in printed
+    peaks = [max(metrics(load(str(out / "tuned.toml"), [f"controller.Kv={kv * f!r}"]).run())["max_abs_torque"])
+             for f in (0.95, 1.05)]
+    assert elasticity == pytest.approx(np.log(peaks[1] / peaks[0]) / np.log(1.05 / 0.95), rel=0.3)
 
 
 def test_robust_tuning_averages_over_drawn_true_parameters(tmp_path):
@@ -232,3 +247,9 @@ def test_cli_tunes_a_sampled_data_scenario_and_refuses_mujoco(tmp_path, capsys):
                  "controller.Kv", "--out", str(tmp_path / "m")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "plant.engine: MuJoCo steps its plant" in err, err
+
+
+def test_a_gain_at_its_bound_is_written_as_the_bound():
+    """exp(log 50) is 49.99999999999999 in floating point: the tuned scenario says 50."""
+    gain = locate(load("example-6.3.1"), "controller.Kv=2:50")
+    assert gain.value(np.log([50.0])) == 50.0 and repr(gain.value(np.log([50.0]))) == "50.0"

@@ -89,22 +89,37 @@ def saturated_fraction(commanded: np.ndarray, applied: np.ndarray) -> float:
 
 
 #: the wind-up warning: the torque sat on its limit over this share of the run, and ‖φ̂‖ grew this many times beyond its
-#: start (and beyond ‖φ‖ when known)
+#: start (and beyond ‖φ‖ when known); the same share alone is the saturation warning, the same growth alone the drift one
 WINDUP_SATURATED, WINDUP_GROWTH = 0.5, 10.0
+LYAPUNOV_GROWTH = 10.0  #: V(t_final) beyond this many times V(0): the warning that V grew where the theory has V̇ ≤ 0
 
 
 def health_warnings(m: dict[str, Any]) -> list[str]:
-    """What the summary line warns of, from a run's metrics: integrator wind-up (the torque on its limit most of the
-    run while the estimates grew far beyond their start), naming the remedies."""
+    """What the summary line warns of, from a run's metrics, each with its remedy: integrator wind-up (the torque on its
+    limit most of the run while the estimates grew far beyond their start); else saturation alone (the numbers are the
+    actuator's, not the law's) and estimate drift alone (‖φ̂‖ ending far beyond its start: a transient that settles is
+    not drift); and V(t_final) ≫ V(0)."""
     out = []
-    sat, grown = m.get("saturated_fraction"), m.get("max_phi_hat_norm")
+    sat, grown = float(m.get("saturated_fraction") or 0.0), float(m.get("max_phi_hat_norm") or 0.0)
     start = max(float(np.linalg.norm(m.get("initial_phi_hat", [0.0]))), float(np.linalg.norm(m.get("phi_true", [0.0]))),
                 1e-12)
-    if sat is not None and grown is not None and sat > WINDUP_SATURATED and grown > WINDUP_GROWTH * start:
+    final = float(np.linalg.norm(m.get("final_phi_hat", [0.0])))
+    saturated, grew = sat > WINDUP_SATURATED, grown > WINDUP_GROWTH * start
+    if saturated and grew:
         out.append(f"wind-up: the torque sat on its limit {100 * sat:.0f} % of the run and ‖φ̂‖ grew to {grown:.4g} "
                    f"(from {start:.4g}); the update law integrates an error the saturated torque cannot remove — use a "
                    "law that filters the applied torque (controller kind 'composite'), σ-modification (law kind "
                    "'sigma') or a projection box (controller.phi_min, phi_max)")
+    elif saturated:
+        out.append(f"saturation: the torque sat on its limit {100 * sat:.0f} % of the run, so these numbers are the "
+                   "actuator's, not the law's — raise plant.torque_limit, lower the gains or slow the trajectory")
+    elif final > WINDUP_GROWTH * start:  # not a transient: the estimate ends far out
+        out.append(f"estimate drift: ‖φ̂‖ ends at {final:.4g} (from {start:.4g}) — σ-modification (law kind 'sigma') or a "
+                   "projection box (controller.phi_min, phi_max) bounds it")
+    v0, v1 = m.get("V_initial"), m.get("V_final")
+    if v0 is not None and v1 is not None and v1 > LYAPUNOV_GROWTH * max(v0, 1e-300):
+        out.append(f"Lyapunov growth: V grew from {v0:.4g} to {v1:.4g} where the theory has V̇ ≤ 0 — its assumptions fail "
+                   "here (a torque limit, a disturbance, unmodelled dynamics, sampling)")
     return out
 
 

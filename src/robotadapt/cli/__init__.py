@@ -35,10 +35,12 @@ def _modules() -> dict[str, ModuleType]:
 
 
 def _parser(modules: dict[str, ModuleType]) -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="robotadapt", description="Adaptive control of rigid robot manipulators.")
+    p = argparse.ArgumentParser(prog="robotadapt", description="Adaptive control of rigid robot manipulators.",
+                                epilog="Start with `robotadapt list`, then `robotadapt run example-6.3.1`; "
+                                "`robotadapt COMMAND --help` for a command's options.")
     p.add_argument("--version", action="version", version=f"%(prog)s {version()}",
                    help="print the installed version and exit")
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for module in modules.values():
         module.add_parser(sub)
     return p
@@ -46,7 +48,11 @@ def _parser(modules: dict[str, ModuleType]) -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     modules = _modules()
-    args = _parser(modules).parse_args(argv)
+    parser = _parser(modules)
+    args = parser.parse_args(argv)
+    if args.command is None:  # bare `robotadapt`: the commands, not an error
+        parser.print_help()
+        return 0
     try:
         return int(modules[args.command].main(args))
     except ConfigError as exc:

@@ -60,10 +60,17 @@ def main(args: argparse.Namespace) -> int:
     gains = ", ".join(f"{k} = {v}" for k, v in summary["gains"].items())
     print(f"tune {scenario.name}: {summary['objective_expression']} {tuned.before.objective:.4g} -> "
           f"{tuned.after.objective:.4g}, max |τ| {tuned.before.max_abs_torque:.4g} -> {tuned.after.max_abs_torque:.4g}"
-          f" in {summary['runs']} runs, {tuned.wall_time:.3g} s; {gains}")
+          f" in {summary['differentiated_runs']} differentiated runs (+ {summary['forward_runs']} forward runs scoring "
+          f"the start and the answer), {tuned.wall_time:.3g} s; {gains}")
     print(f"wrote {out}/")
     if not tuned.feasible:
+        hint = ""
+        if summary["peak_elasticity"]:  # the gain that moves the peak most, and which way to move it
+            name, value = max(summary["peak_elasticity"].items(), key=lambda kv: abs(kv[1]))
+            hint = (f"; the peak moves most with {name} (∂ln max|τ|/∂ln gain = {value:.2g}: "
+                    f"{'lower' if value > 0 else 'raise'} it, or widen its range)")
         print(f"robotadapt: no gains found meet the budget max |τ| ≤ {args.max_torque:g} (best found: "
-              f"{tuned.after.max_abs_torque:.4g}{'' if tuned.after.ok else ', diverged'}); kept in {out}/tuned.toml")
+              f"{tuned.after.max_abs_torque:.4g}{'' if tuned.after.ok else ', diverged'}){hint}; kept in "
+              f"{out}/tuned.toml")
         return EXIT_BUDGET
     return 0

@@ -162,10 +162,15 @@ def _finish(fig: Figure, axes: list[Any], title: str) -> Figure:
     axes[-1].set_xlabel("time $t$ (s)")
     for ax in axes:
         ax.grid(True, alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(loc="best", fontsize="small")
+        legend(ax)
     fig.tight_layout()
     return fig
+
+
+def legend(ax: Any) -> None:
+    """The axes' legend, if it has labelled lines, outside the axes on the right: never over the data."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0)
 
 
 def _save(fig: Figure, path: Path) -> Path:
@@ -199,9 +204,22 @@ def tracking_error_figure(res: SimulationResult, title: str = "", model: Any = N
 
 
 def torques_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
-    """Controller output τ_i(t): torques (N·m) at revolute joints, forces (N) at prismatic ones, a panel each."""
-    return _joint_panels(res.tau, res.t, "\\tau", lambda kind: f"{EFFORT_NAME[kind]} $\\tau_i$ ({EFFORT[kind]})",
-                         _title(title, "control input $\\tau$"), model)
+    """Controller output τ_i(t): torques (N·m) at revolute joints, forces (N) at prismatic ones, a panel each; the
+    actuator's limit ±τ_max,i, where the plant has one, dashed in each joint's colour."""
+    fig = _joint_panels(res.tau, res.t, "\\tau", lambda kind: f"{EFFORT_NAME[kind]} $\\tau_i$ ({EFFORT[kind]})",
+                        _title(title, "control input $\\tau$"), model)
+    limit = res.info.get("plant", {}).get("actuator", {}).get("torque_limit")
+    if limit is not None:
+        limits = np.broadcast_to(np.asarray(limit, dtype=float), (res.tau.shape[-1],))
+        groups = joint_groups(res.tau.shape[-1], joint_types(model) if model is not None else None)
+        for ax, (_, joints) in zip(fig.axes, groups, strict=True):
+            for i in joints:
+                for sign in (1.0, -1.0):
+                    ax.axhline(sign * limits[i], linestyle=":", linewidth=1.0, color=style(i)["color"],
+                               label="actuator limit $\\pm\\tau_{max}$" if (i, sign) == (joints[0], 1.0) else None)
+            legend(ax)
+        fig.tight_layout()
+    return fig
 
 
 def _many_parameters(res: SimulationResult, ax: Any) -> None:

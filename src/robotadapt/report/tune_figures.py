@@ -36,7 +36,7 @@ def tune_figure(tuned: Tuned, path: Path) -> None:
     ax.semilogy([it.objective for it in its], "o-", color="C0", label=tuned.objective.text)
     ax.set_xlabel("iteration")
     ax.set_ylabel(f"objective: {tuned.objective.text}", color="C0")
-    ax.set_title(f"{len(its)} iterations, {tuned.search.runs} runs, {tuned.wall_time:.3g} s")
+    ax.set_title(f"{len(its)} iterations, {tuned.search.runs} differentiated runs, {tuned.wall_time:.3g} s")
     if tuned.max_torque is not None:
         twin = ax.twinx()
         twin.plot([it.max_abs_torque for it in its], "s--", color="C3", ms=3)

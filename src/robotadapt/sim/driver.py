@@ -63,6 +63,9 @@ class Transition(Protocol):
     def program_key(self) -> Any:
         """The transition without what only its feed reads (a sensor's seed): runs with equal keys share a program."""
 
+    def blanks(self, carry: Any) -> tuple[Any, Any]:
+        """Zeros shaped like a step's record and like its verdict's `bad` (None without a guard), from the carry."""
+
     def status(self, k: int, why: int, bad: Any) -> Status:
         """The status of a run stopped at step k for the code `why` (`bad`: the verdict's, this run's)."""
 
@@ -171,17 +174,17 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
     return records, valid[:T], k_stop, why, bad
 
 
-PROGRAMS: dict[Any, tuple[Any, Callable[..., Any], dict[Any, Any]]] = {}  # by (skeleton, log_every, mapping)
+PROGRAMS: dict[Any, tuple[Any, Callable[..., Any]]] = {}  # compiled programs by (skeleton, log_every, mapping)
 
 
-def _program(transition: Any, log_every: int, mapped: Any) -> tuple[Callable[..., Any], dict[Any, Any]]:
+def _program(transition: Any, log_every: int, mapped: Any) -> Callable[..., Any]:
     """The jitted scan over blocks of `log_every` steps for transitions shaped like this one (`mapped`: vmapped over
-    runs, None: not), and the entry's memo of verdict shapes (:func:`_bad_shapes`). `run(arrays, state, xs, n)` scans
-    the blocks of `xs` (`(blocks, log_every, ...)`), keeps each block's first record and its validity, and computes no
-    step after n (the padding of the last call). The entry holds its template, so that ids in a key stay valid."""
+    runs, None: not). `run(arrays, state, xs, n)` scans the blocks of `xs` (`(blocks, log_every, ...)`), keeps each
+    block's first record and its validity, and computes no step after n (the padding of the last call). The entry
+    holds its template, so that ids in a key stay valid."""
     key = (skeleton(transition.program_key(), []), log_every, mapped)
     if key in PROGRAMS:
-        return PROGRAMS[key][1], PROGRAMS[key][2]
+        return PROGRAMS[key][1]
     jax = jax_module()
     jnp, lax = jax.numpy, jax.lax
     template = rebuild(transition, iter(_leaves(transition)))
@@ -189,7 +192,8 @@ def _program(transition: Any, log_every: int, mapped: Any) -> tuple[Callable[...
     def run(arrays: list[Array], state: Any, xs: Any, n: Array) -> Any:
         def block(state: Any, xs: Any) -> tuple[Any, Any]:
             """The block's steps that exist (none of the padding after step n); the first one's record is kept."""
-            step = rebuild(template, iter(arrays)).compiled()  # a copy per trace: a law's cached constants stay in it
+            traced = rebuild(template, iter(arrays))  # a copy per trace: a law's cached constants stay in it
+            step = traced.compiled()
 
             def one(state: Any, inputs: Any) -> tuple[Any, Any]:
                 carry, alive, k_stop, why, bad = state
@@ -200,18 +204,23 @@ def _program(transition: Any, log_every: int, mapped: Any) -> tuple[Callable[...
                 return state, (record, ok)
 
             count = jnp.clip(n + 1 - xs.k[0], 0, xs.k.shape[0])  # the padding after step n: not computed
-            state, out = one(state, map_tree(lambda a: a[0], xs))  # past n (padding): judged as nothing, unrecorded
-            if xs.k.shape[0] > 1:  # (a block of one step, log_every = 1, has no loop)
-                state = lax.fori_loop(1, count, lambda i, state: one(state, map_tree(lambda a: a[i], xs))[0], state)
-            return state, out
+            if xs.k.shape[0] == 1:  # log_every = 1: the block is its step (past n, padding: judged as nothing)
+                return one(state, map_tree(lambda a: a[0], xs))
+
+            def body(i: Array, carried: Any) -> Any:  # one copy of the step in the program: its record kept at i = 0
+                state, kept = one(carried[0], map_tree(lambda a: a[i], xs))
+                return state, map_tree(lambda a, b: jnp.where(i == 0, a, b), kept, carried[1])
+
+            blank = (traced.blanks(state[0])[0], jnp.zeros_like(state[1]))
+            return lax.fori_loop(0, count, body, (state, blank))
 
         return lax.scan(block, state, xs)
 
     program = jax.jit(run if mapped is None else jax.vmap(run, in_axes=(0, 0, mapped, None)))
     if len(PROGRAMS) >= MAX_PROGRAMS:
         PROGRAMS.pop(next(iter(PROGRAMS)))
-    PROGRAMS[key] = (template, program, {})
-    return program, PROGRAMS[key][2]
+    PROGRAMS[key] = (template, program)
+    return program
 
 
 def _leaves(transition: Any) -> list[Array]:
@@ -263,17 +272,15 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     else:
         arrays = [jnp.asarray(a) for a in _leaves(transition)]
         shape, axes = _runs_shape(carry), None
-    program, shapes = _program(runs[0] if mapped is not None else transition, log_every, axes)
+    program = _program(runs[0] if mapped is not None else transition, log_every, axes)
     probe = feed(0, 1)
     step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe))
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
     most = max(1, int(min(CHUNK_STEPS, INPUT_BYTES // max(step_bytes, 1))) // log_every)
     per_call = min(most, 1 << max(0, blocks - 1).bit_length())  # a power of two: fewer shapes, fewer compilations
     one, one_carry = (transition, carry) if mapped is None else (runs[0], map_tree(lambda a: a[0], carry))
-    known = tuple(np.shape(a) for a in _flatten(one_carry)), shape
-    if known not in shapes:  # the verdict's shapes: one trace of the step per program and shape, not one per run
-        shapes[known] = _bad_shapes(one, one_carry, probe if mapped is None else take_run(probe, 0, mapped), shape)
-    bad = map_tree(lambda s: jnp.zeros(s.shape, s.dtype), shapes[known])
+    lead = shape if not _runs_shape(one_carry) else ()  # a mapped run's carry has no run axes; a stacked one has
+    bad = map_tree(lambda a: jnp.zeros(lead + np.shape(a)), one.blanks(one_carry)[1])
     state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad)
     records, valid = [], []
     for first in range(0, blocks, per_call):
@@ -325,18 +332,6 @@ def _flatten(tree: Any) -> list[Array]:
 def _runs_shape(carry: Any) -> tuple[int, ...]:
     """The run axes of a stacked carry: those of its first leaf without its last axis (the state z `(..., d)`)."""
     return tuple(np.shape(_flatten(carry)[0])[:-1])
-
-
-def _bad_shapes(transition: Any, carry: Any, probe: Any, shape: tuple[int, ...]) -> Any:
-    """The shapes of one verdict's `bad` for the runs (None where the transition words no guard)."""
-    jax = jax_module()
-    copy = rebuild(transition, iter(_leaves(transition)))  # a law's cached constants land on the copy, not the run's
-    verdict = jax.eval_shape(lambda: copy.compiled()(map_tree(jax.numpy.asarray, carry),
-                                                     map_tree(lambda a: jax.numpy.asarray(a[0]), probe))[2])
-    if verdict.bad is None:
-        return None
-    lead = shape if not _runs_shape(carry) else ()
-    return map_tree(lambda s: jax.ShapeDtypeStruct(lead + s.shape, s.dtype), verdict.bad)
 
 
 def drive(runs: Sequence[Any], carries: Sequence[Any], feed: Feed, n: int, log_every: int, *, backend: str,

@@ -295,6 +295,11 @@ class RK4Step:
     def program_key(self) -> RK4Step:
         return self
 
+    def blanks(self, carry: tuple[Array, Ring | None]) -> tuple[Array, Array | None]:
+        """Zeros like the record (the state) and like `bad` (the stage state a guard failed at; None without one)."""
+        zero = array_namespace(carry[0]).zeros_like(carry[0])
+        return zero, zero if self.loop.guarded else None
+
     def feed(self, trajectory: Trajectory, runs: bool = False) -> Callable[[int, int], Any]:
         """The inputs of steps first … first + count − 1: the reference at each step's three stage instants in one
         vectorized call (`runs`: a merged trajectory with a run axis, sampled on `(times, 1)`)."""

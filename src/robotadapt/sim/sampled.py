@@ -158,6 +158,13 @@ class Tick:
         plant sub-step (an n-DOF arm's dynamics: thousands of operations)."""
         return partial(self.__call__, dynamics=jax_module().jit(self.dynamics))
 
+    def blanks(self, carry: Carry) -> tuple[Record, tuple[Array, Array] | None]:
+        """Zeros like the record and like `bad` (the q and x a guard failed at; None without a guard)."""
+        xp = array_namespace(carry.s, carry.x)
+        n, zero = self.loop.n, xp.zeros(carry.s.shape[-1] + carry.x.shape[-1] + carry.w.shape[-1])
+        record = Record(zero, *(xp.zeros(n) for _ in range(4)))
+        return record, (xp.zeros(n), xp.zeros_like(carry.x)) if self.loop.guarded else None
+
     def program_key(self) -> Tick:
         """The tick with its sensor's seed set aside: the noise is drawn on the host from each run's own seed, so runs
         that differ only in it share one program."""

@@ -121,8 +121,8 @@ class Gain:
         """The gain as the scenario writes it: a number, a list (the diagonal) or a matrix."""
         g = np.asarray(self.gain(np.asarray(theta, dtype=float)), dtype=float)
         if self.form == "scalar":
-            return float(np.exp(theta[0]))
-        return np.diag(g).tolist() if self.form == "diagonal" else g.tolist()
+            return readable(float(np.exp(theta[0])))
+        return [readable(v) for v in np.diag(g)] if self.form == "diagonal" else [[readable(v) for v in row] for row in g]
 
     def bounds(self) -> list[tuple[float | None, float | None]]:
         if self.lower is None or self.upper is None:
@@ -235,6 +235,12 @@ def draw_over(scenario: Scenario, spec: str, samples: int, seed: int) -> tuple[s
     p = scenario.setup.plant.phi.size
     rng = np.random.default_rng(seed)
     return key, rng.uniform(np.broadcast_to(lo, (p,)), np.broadcast_to(hi, (p,)), size=(samples, p))
+
+
+def readable(value: float) -> float:
+    """`value` to 12 significant digits: exp(log 50) is written 50, not 49.99999999999999 (a change of 1e-12 relative,
+    far inside what a gain can matter)."""
+    return float(f"{float(value):.12g}")
 
 
 def tuned_scenario(scenario: Scenario, gains: list[Gain], theta: Array, phi: Array | None = None) -> Scenario:
