@@ -119,7 +119,7 @@ def health_warnings(m: dict[str, Any]) -> list[str]:
     v0, v1 = m.get("V_initial"), m.get("V_final")
     if v0 is not None and v1 is not None and v1 > LYAPUNOV_GROWTH * max(v0, 1e-300):
         out.append(f"Lyapunov growth: V grew from {v0:.4g} to {v1:.4g} where the theory has V̇ ≤ 0 — its assumptions fail "
-                   "here (a torque limit, a disturbance, unmodelled dynamics, sampling)")
+                   "here (a torque limit, a disturbance, measurement noise, unmodelled dynamics, sampling)")
     return out
 
 
