@@ -78,8 +78,13 @@ def test_tracking_error_and_torques_have_units_per_joint_type(polar):
     model = scenario.setup.controller.model
     t = texts(figures.tracking_error_figure(res, "problem-6.2-1", model))
     assert "problem-6.2-1" in t["suptitle"][0] and "$e = q_d - q$" in t["suptitle"][0]
-    assert [label.rsplit("(", 1)[1] for label in t["ylabels"]] == ["rad)", "m)"]
-    assert t["titles"] == ["revolute joint", "prismatic joint"]
+    # per joint type e on a linear axis, then |e| on a log one (a convergence to round-off shows there)
+    assert [label.rsplit("(", 1)[1] for label in t["ylabels"]] == ["rad)", "rad), log scale", "m)", "m), log scale"]
+    assert t["titles"] == ["revolute joint", "", "prismatic joint", ""]  # the log panel sits under its type's
+    fig = figures.tracking_error_figure(res, "problem-6.2-1", model)
+    assert [ax.get_yscale() for ax in fig.axes] == ["linear", "log", "linear", "log"]
+    logged = fig.axes[1].get_lines()[0].get_ydata()
+    np.testing.assert_array_equal(logged, np.where(np.abs(res.e[:, 0]) > 0, np.abs(res.e[:, 0]), np.nan))
     assert {"$e_{1}$", "$e_{2}$"} <= set(t["legends"]) and t["xlabels"][-1] == "time $t$ (s)"
     t = texts(figures.torques_figure(res, "problem-6.2-1", model))
     assert [label.rsplit("(", 1)[1] for label in t["ylabels"]] == ["N·m)", "N)"]
@@ -89,7 +94,8 @@ def test_tracking_error_and_torques_have_units_per_joint_type(polar):
 
 def test_without_a_model_the_axes_say_rad_or_m(polar):
     _, res = polar
-    assert texts(figures.tracking_error_figure(res))["ylabels"] == ["tracking error $e_i$ (rad or m)"]
+    assert texts(figures.tracking_error_figure(res))["ylabels"] == ["tracking error $e_i$ (rad or m)",
+                                                                   "$|e_i|$ (rad or m), log scale"]
     assert texts(figures.torques_figure(res))["ylabels"] == [r"torque or force $\tau_i$ (N·m or N)"]
 
 

@@ -81,3 +81,35 @@ def test_a_saturated_three_link_arm_is_not_reported_as_fine(tmp_path):
     levels = {round(float(y), 9) for ax in fig.axes for line2d in ax.get_lines()
               if len(set(np.asarray(line2d.get_ydata(), dtype=float))) == 1 for y in line2d.get_ydata()}
     assert {50.0, -50.0} <= levels
+
+
+def test_the_pe_legend_says_one_parameter_only_for_one():
+    """Example 6.5.2(a): q_d = sin t over windows of 2π excites m and b equally, λ_max = λ_min: two parameters, so the
+    legend must not say "one parameter"; for a one-parameter model it may."""
+    from robotadapt.analysis.excitation import excitation
+    from robotadapt.report.html import coincidence_note
+
+    s = load("example-6.5.2a").setup
+    exc = excitation(s.controller.model, s.trajectory, s.t_final, 2 * np.pi)
+    # by hand: Y_d = [q̈_d, q̇_d] = [−sin t, cos t]; over a window of 2π its Gram matrix is π I, both eigenvalues π
+    assert len(exc.param_names) == 2
+    np.testing.assert_allclose(exc.alpha, np.pi, rtol=1e-6)
+    np.testing.assert_allclose(exc.beta, np.pi, rtol=1e-6)
+    note = coincidence_note(exc.beta, exc.alpha, len(exc.param_names))
+    assert "one parameter" not in note and "λ_max = λ_min" in note
+    assert "one parameter" in coincidence_note(exc.beta, exc.beta, 1)
+    assert coincidence_note(exc.beta, exc.beta / 2, 2) == ""
+
+
+def test_the_gallery_says_a_run_stopped_early_and_counts_in_full():
+    """Example 6.2.2 as the book ran it stops in its first step: the gallery's section says so, with the status, and
+    counts like n_samples read in full (20001, not 2e+04)."""
+    from robotadapt.report.html import GalleryEntry, gallery_html
+
+    s = load("example-6.2.2", ["simulation.t_final=0.5"])
+    res = s.run()
+    assert res.status != "ok"
+    m = metrics(res) | {"n_samples": 20001}
+    page = gallery_html([GalleryEntry("example-6.2.2", s.description, "", {}, m, 0.5, 0.5, 0.1)])
+    assert "This run stopped early, at t = 0 s of 0.5 s: diverged within the step from 0 to 0.001 s" in page
+    assert ">20001<" in page and "2e+04" not in page

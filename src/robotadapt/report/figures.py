@@ -198,9 +198,23 @@ def _joint_panels(values: np.ndarray, t: np.ndarray, symbol: str, ylabel: Callab
 
 
 def tracking_error_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
-    """e_i(t) = q_d,i − q_i for every joint: one panel per joint type (rad for revolute, m for prismatic joints)."""
-    return _joint_panels(res.e, res.t, "e", lambda kind: f"tracking error $e_i$ ({POSITION[kind]})",
-                         _title(title, "tracking error $e = q_d - q$"), model)
+    """e_i(t) = q_d,i − q_i for every joint, per joint type (rad for revolute, m for prismatic joints): e on a linear
+    axis, then |e| on a log axis, where a convergence to round-off (1e-10 and below) shows instead of a flat zero."""
+    groups = joint_groups(res.e.shape[-1], joint_types(model) if model is not None else None)
+    fig, axes = _panels(2 * len(groups), height=2.0)
+    for k, (kind, joints) in enumerate(groups):
+        linear, log = axes[2 * k], axes[2 * k + 1]
+        for i in joints:
+            linear.plot(res.t, res.e[:, i], label=f"$e_{{{i + 1}}}$", **style(i))
+            magnitude = positive(np.abs(res.e[:, i]))
+            if np.isfinite(magnitude).any():  # a joint whose error is exactly 0 throughout has no log line
+                log.semilogy(res.t, magnitude, **style(i))
+        log.set_yscale("log")
+        linear.set_ylabel(f"tracking error $e_i$ ({POSITION[kind]})")
+        log.set_ylabel(f"$|e_i|$ ({POSITION[kind]}), log scale")
+        if len(groups) > 1:
+            linear.set_title(JOINT_NAME[kind].removesuffix("s" if len(joints) == 1 else ""), fontsize="medium")
+    return _finish(fig, axes, _title(title, "tracking error $e = q_d - q$"))
 
 
 def torques_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:

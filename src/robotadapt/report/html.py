@@ -85,11 +85,20 @@ _UNDER = {"linestyle": "-", "linewidth": 3.0, "alpha": 0.5}
 _OVER = {"linestyle": "--", "marker": "o", "markevery": 0.08, "markersize": 5, "markerfacecolor": "none"}
 
 
-def _pair(ax: Any, t: np.ndarray, high: np.ndarray, low: np.ndarray, floor: float, labels: tuple[str, str]) -> None:
-    """λ_max and λ_min on a log axis; where they coincide (one parameter) both stay visible: the larger one wide and
-    pale, the smaller one dashed with markers, and the legend says so."""
+def coincidence_note(high: np.ndarray, low: np.ndarray, p: int) -> str:
+    """What the legend says where λ_max and λ_min coincide: one parameter has one eigenvalue; with more, the Gram
+    matrix (6.5.2) is a multiple of the identity there (Example 6.5.2: sin t over whole periods excites m and b equally)."""
+    if not _coincide(high, low):
+        return ""
+    return " (the curves coincide: one parameter)" if p == 1 else " (the curves coincide: λ_max = λ_min, equal excitation)"
+
+
+def _pair(ax: Any, t: np.ndarray, high: np.ndarray, low: np.ndarray, floor: float, labels: tuple[str, str],
+          p: int) -> None:
+    """λ_max and λ_min on a log axis; where they coincide both stay visible: the larger one wide and pale, the smaller
+    one dashed with markers, and the legend says why (:func:`coincidence_note`, `p` the parameters analysed)."""
     ax.semilogy(t, positive(high), label=labels[0], color="C0", **_UNDER)
-    note = " (the curves coincide: one parameter)" if _coincide(high, low) else ""
+    note = coincidence_note(high, low, p)
     _log_with_zero(ax, t, low, floor, labels[1] + note, color="C1", **_OVER)
 
 
@@ -106,14 +115,16 @@ def excitation_plot(exc: Excitation, title: str = "") -> Figure:
     """The figure of :func:`excitation_figure`, returned open."""
     floor = 1e-12 * max(exc.beta_max, 1e-300)
     fig, (ax_w, ax_c) = plt.subplots(2, 1, figsize=(7, 6.5))
-    _pair(ax_w, exc.t0, exc.beta, exc.alpha, floor, (r"$\beta(t_0) = \lambda_{\max}$", r"$\alpha(t_0) = \lambda_{\min}$"))
+    _pair(ax_w, exc.t0, exc.beta, exc.alpha, floor, (r"$\beta(t_0) = \lambda_{\max}$", r"$\alpha(t_0) = \lambda_{\min}$"),
+          len(exc.param_names))
     ax_w.axhline(exc.rtol * exc.beta_max, color="k", linestyle=":",
                  label=f"PE threshold {_power_of_ten(exc.rtol)}" + r"$\,\max\,\beta$")
     verdict = "persistently exciting" if exc.persistently_exciting else "NOT persistently exciting"
     ax_w.set_title(f"{title}: {verdict} ($\\rho$ = {exc.window:.4g} s)".lstrip(": "))
     ax_w.set_xlabel("window start $t_0$ (s)")
     ax_w.set_ylabel(r"eigenvalues of $\int_{t_0}^{t_0+\rho} Y_d^T Y_d\,dt$")
-    _pair(ax_c, exc.t_cum, exc.lambda_max_cum, exc.lambda_min_cum, floor, (r"$\lambda_{\max}$", r"$\lambda_{\min}$"))
+    _pair(ax_c, exc.t_cum, exc.lambda_max_cum, exc.lambda_min_cum, floor, (r"$\lambda_{\max}$", r"$\lambda_{\min}$"),
+          len(exc.param_names))
     grows = "grows" if exc.integral_grows else "levels off"
     ax_c.set_title(f"(6.6.18): $\\lambda_{{\\min}} \\int_0^t Y_d^T Y_d\\,d\\sigma$ {grows} "
                    f"($\\propto t^{{{exc.growth_exponent:.2f}}}$ over the second half)")
@@ -191,6 +202,9 @@ def gallery_html(entries: list[GalleryEntry]) -> str:
     for e in entries:
         cap = (f'<p class="bad">Simulated {e.t_final:g} s of the scenario\'s {e.t_scenario:g} s '
                "(capped with --t-final).</p>" if e.t_final < e.t_scenario else "")
+        if e.metrics.get("status", "ok") != "ok":  # its figures end where it stopped: say so, not empty axes alone
+            cap += (f'<p class="bad">This run stopped early, at t = {e.metrics["t_end"]:.4g} s of {e.t_final:g} s: '
+                    f"{html.escape(str(e.metrics['status']))}. Its figures end there.</p>")
         settings = "".join(f"<tr><th class=\"l\">{k}</th><td class=\"l\">{html.escape(', '.join(flat(v)))}</td></tr>"
                            for k, v in e.settings.items())
         metrics = "".join(f"<tr><th class=\"l\">{html.escape(k)}</th><td class=\"l\">{html.escape(number_text(v))}</td></tr>"

@@ -77,7 +77,8 @@ LINEUP: dict[str, Contender] = {
 
 
 def number_text(v: Any) -> str:
-    """A number or list of numbers to 4 significant digits, text as is, None as —, a record as its fields."""
+    """A number or list of numbers to 4 significant digits (an integer, a count, in full: 20001, not 2e+04), text as
+    is, None as —, a record as its fields."""
     if v is None:
         return "—"
     if isinstance(v, bool | str):
@@ -86,6 +87,8 @@ def number_text(v: Any) -> str:
         return "[" + ", ".join(number_text(x) for x in v) + "]"
     if isinstance(v, dict):  # a record (a run's stop, its plant's effects)
         return ", ".join(f"{k} = {number_text(x)}" for k, x in v.items())
+    if isinstance(v, int):
+        return str(v)
     return f"{v:.4g}"
 
 
