@@ -127,6 +127,22 @@ def test_study_overlay_has_units_and_starts_at_the_first_nonzero_error():
     for line in fig.axes[0].get_lines():
         y = np.asarray(line.get_ydata(), dtype=float)
         assert np.isnan(y[0]) and np.all(np.isnan(y) | (y > 1e-15))  # e(0) = 0 is left out, not drawn at 1e-16
+    assert [line.get_label() for line in fig.axes[0].get_lines()] == ["Kv = 5", "Kv = 20"]  # the key is in the title
+
+
+def test_a_study_over_numbers_takes_an_ordered_colour_scale():
+    """Values given out of order (20, 0.0001, 5): colours follow the values' order along viridis, not the list's."""
+    from types import SimpleNamespace
+
+    from matplotlib.colors import to_rgba
+
+    runs = [SimpleNamespace(value=v) for v in (20.0, 1e-4, 5.0)]
+    colours = [to_rgba(figures.study_style(runs, i)["color"]) for i in range(3)]
+    viridis = plt.get_cmap("viridis")
+    assert colours == [viridis(0.9), viridis(0.0), viridis(0.45)]
+    assert figures.number_label(1e-4) == "0.0001" and figures.number_label("rk4") == "rk4"
+    words = [SimpleNamespace(value=v) for v in ("euler", "hold")]
+    assert [figures.study_style(words, i)["color"] for i in range(2)] == [figures.style(i)["color"] for i in range(2)]
 
 
 # ---------------------------------------------------------------------------------------------------------------------

@@ -349,15 +349,36 @@ def study_figure(key: str, runs: list[Any], title: str = "", model: Any = None) 
     known = bool(runs) and runs[0].result.phi is not None
     for i, run in enumerate(runs):
         res = run.result
-        ax_e.semilogy(res.t, positive(np.linalg.norm(res.e, axis=-1)), label=f"{key} = {run.value}", **style(i))
+        line = study_style(runs, i)
+        label = f"{key.rsplit('.', 1)[-1]} = {number_label(run.value)}"  # the full key is in the title
+        ax_e.semilogy(res.t, positive(np.linalg.norm(res.e, axis=-1)), label=label, **line)
         err = res.phi_err if res.phi_err is not None else res.phi_hat
         if err.shape[-1]:
-            ax_p.semilogy(res.t, positive(np.linalg.norm(err, axis=-1)), label=f"{key} = {run.value}", **style(i))
+            ax_p.semilogy(res.t, positive(np.linalg.norm(err, axis=-1)), label=label, **line)
     ax_e.set_ylabel(f"$\\Vert e(t)\\Vert$ ({norm_unit(POSITION, joints)})")
     ax_p.set_ylabel(r"$\Vert\varphi - \hat{\varphi}(t)\Vert$" if known else r"$\Vert\hat{\varphi}(t)\Vert$")
     ax_e.set_title("tracking error", fontsize="medium")
     ax_p.set_title("parameter error" if known else "parameter estimate", fontsize="medium")
     return _finish(fig, [ax_e, ax_p], _title(title, f"effect of {key}"))
+
+
+def number_label(value: Any) -> str:
+    """A study value as a legend reads it: numbers to 4 significant digits (0.0001 → 1e-04 stays 0.0001), others as
+    they are."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return str(value)
+    return f"{value:.4g}"
+
+
+def study_style(runs: list[Any], i: int) -> dict[str, Any]:
+    """Run i's line: for a study over numbers, an ordered colour scale (viridis, by the value's rank: neighbours in
+    value are neighbours in colour), the dashes and markers of :func:`style`; else :func:`style`."""
+    values = [run.value for run in runs]
+    line = style(i)
+    if len(values) > 1 and all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
+        rank = int(np.argsort(np.argsort(values, kind="stable"))[i])
+        line["color"] = plt.get_cmap("viridis")(0.9 * rank / (len(values) - 1))
+    return line
 
 
 def study(key: str, runs: list[Any], path: Path, title: str = "", model: Any = None) -> Path:
