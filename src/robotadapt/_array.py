@@ -11,7 +11,7 @@ from typing import Any
 import array_api_compat
 import numpy as np
 
-__all__ = ["array_namespace", "matrix", "matvec", "quad", "solve", "vector"]
+__all__ = ["array_namespace", "matrix", "matvec", "quad", "repeat", "rk4", "solve", "vector"]
 
 
 def array_namespace(*arrays: Any) -> Any:

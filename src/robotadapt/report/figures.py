@@ -23,6 +23,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..files import atomic_write, writable_dir  # noqa: E402
+from ..studies.compare import number_text  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -219,7 +220,7 @@ def tracking_error_figure(res: SimulationResult, title: str = "", model: Any = N
 
 def torques_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
     """Controller output τ_i(t): torques (N·m) at revolute joints, forces (N) at prismatic ones, a panel each; the
-    actuator's limit ±τ_max,i, where the plant has one, dashed in each joint's colour."""
+    actuator's limit ±τ_max,i, where the plant has one, dotted in each joint's colour."""
     fig = _joint_panels(res.tau, res.t, "\\tau", lambda kind: f"{EFFORT_NAME[kind]} $\\tau_i$ ({EFFORT[kind]})",
                         _title(title, "control input $\\tau$"), model)
     limit = res.info.get("plant", {}).get("actuator", {}).get("torque_limit")
@@ -350,7 +351,7 @@ def study_figure(key: str, runs: list[Any], title: str = "", model: Any = None) 
     for i, run in enumerate(runs):
         res = run.result
         line = study_style(runs, i)
-        label = f"{key.rsplit('.', 1)[-1]} = {number_label(run.value)}"  # the full key is in the title
+        label = f"{key.rsplit('.', 1)[-1]} = {number_text(run.value)}"  # the full key is in the title
         ax_e.semilogy(res.t, positive(np.linalg.norm(res.e, axis=-1)), label=label, **line)
         err = res.phi_err if res.phi_err is not None else res.phi_hat
         if err.shape[-1]:
@@ -360,14 +361,6 @@ def study_figure(key: str, runs: list[Any], title: str = "", model: Any = None) 
     ax_e.set_title("tracking error", fontsize="medium")
     ax_p.set_title("parameter error" if known else "parameter estimate", fontsize="medium")
     return _finish(fig, [ax_e, ax_p], _title(title, f"effect of {key}"))
-
-
-def number_label(value: Any) -> str:
-    """A study value as a legend reads it: numbers to 4 significant digits (0.0001 → 1e-04 stays 0.0001), others as
-    they are."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return str(value)
-    return f"{value:.4g}"
 
 
 def study_style(runs: list[Any], i: int) -> dict[str, Any]:

@@ -26,6 +26,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
+from .._array import array_namespace
 from ..validation import ConfigError
 from .compiled import float64, jax_module, rebuild, skeleton
 from .status import Status
@@ -92,13 +93,9 @@ def map_tree(fn: Callable[..., Any], tree: Any, *rest: Any) -> Any:
 
 def _where(now: Array, new: Array, old: Array) -> Array:
     """`new` where `now` (per run) else `old`, `now` broadcast over each leaf's trailing axes."""
-    xp = np if isinstance(now, np.ndarray | bool | np.bool_) else jax_module().numpy
+    xp = array_namespace(now, new, old)
     now = xp.asarray(now)
-    return xp.where(now.reshape(now.shape + (1,) * (xp.ndim(new) - now.ndim)), new, old)
-
-
-def _xp(a: Any) -> Any:
-    return np if isinstance(a, np.ndarray | np.generic | bool | int) else jax_module().numpy
+    return xp.where(now.reshape(now.shape + (1,) * (new.ndim - now.ndim)), new, old)
 
 
 def _judge(alive: Array, k: Any, n: int, verdict: Verdict) -> tuple[Array, Array, Array]:
@@ -110,7 +107,8 @@ def _judge(alive: Array, k: Any, n: int, verdict: Verdict) -> tuple[Array, Array
         return alive & active & (verdict.why != 0), verdict.why, alive & exists
     at_sample = alive & exists & ~verdict.held
     after = alive & active & verdict.held & (verdict.why != 0)
-    return at_sample | after, _xp(verdict.why).where(at_sample, GUARD, verdict.why), alive & exists & verdict.held
+    code = array_namespace(verdict.why).where(at_sample, GUARD, verdict.why)
+    return at_sample | after, code, alive & exists & verdict.held
 
 
 def take_run(inputs: Any, i: int, mapped: Any) -> Any:

@@ -49,6 +49,7 @@ class Rollout:
     sensor's noise drawn from its seed) laid out ahead as `(blocks, steps per block, ...)` by the transition's feed."""
 
     transition: Any  # RK4Step or Tick on the untraced loop: what `signals` rebuilds on the traced one
+    h: float  # the step: dt, or the control period
     n: int
     log_every: int
     inputs: Any
@@ -80,13 +81,12 @@ class Rollout:
         per_block = max(1, math.isqrt(n_steps + 1))
         blocks = -(-(n_steps + 1) // per_block)
         laid = inputs(0, blocks * per_block)  # the padding after n is fed, computed and not kept
-        return cls(step, n_steps, log_every, map_tree(lambda a: a.reshape((blocks, per_block) + a.shape[1:]), laid))
+        return cls(step, h, n_steps, log_every, map_tree(lambda a: a.reshape((blocks, per_block) + a.shape[1:]), laid))
 
     @property
     def times(self) -> Array:
         """The logged instants, `(T,)`."""
-        h = self.transition.dt if hasattr(self.transition, "dt") else self.transition.opts.control_period
-        return h * np.arange(0, self.n + 1, self.log_every)
+        return self.h * np.arange(0, self.n + 1, self.log_every)
 
     def records(self, loop: ClosedLoop, z0: Array) -> Any:
         """The logged records `(T, ...)` of the run of `loop` from `z0` (traced or not), differentiable in everything

@@ -313,6 +313,8 @@ class _Draws:
         self.start, self.ahead = 0, np.zeros((0, 2, sensor.n))
 
     def __call__(self, first: int, count: int) -> Array:
+        if first < self.start:
+            raise ValueError(f"tick {first} was forgotten (the draws start at tick {self.start})")
         end = self.start + len(self.ahead)
         if first + count > end:
             self.ahead = np.concatenate([self.ahead, self.sensor.noise(self.rng, first + count - end)])
@@ -324,7 +326,7 @@ def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory]
                     n_ticks: int, log_every: int, max_state: float, progress: bool, lines: list[Array] | None,
                     backend: str = "numpy") -> tuple[Array, Array, Array, list[Status], dict[str, Array]]:
     """N runs' ticks 0 … `n_ticks` through the one driver: one program mapped over the runs (`backend` "jax") or the
-    runs one by one in Python ("numpy", the reference). `traj`: one trajectory for every run or one per run; `z0`
+    runs in lockstep in Python ("numpy", the reference). `traj`: one trajectory for every run or one per run; `z0`
     `(N, d)`; `lines` each run's delay line contents (None: no line). Returns the logged times, the states `(T, N, d)`,
     each run's logged count (a stopped run's rows after it repeat its last one), the statuses and the logged signals
     `(T, N, n)` (:meth:`Tick.logged`)."""
@@ -332,7 +334,7 @@ def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory]
                   lines is not None) for loop in loops]
     carries = [tick.start(z0[i], None if lines is None else lines[i]) for i, tick in enumerate(ticks)]
     shared = not isinstance(traj, list)
-    inputs, mapped = feed(ticks, [traj] if not isinstance(traj, list) else traj, shared)
+    inputs, mapped = feed(ticks, traj if isinstance(traj, list) else [traj], shared)
     trace = drive(ticks, carries, inputs, n_ticks, log_every, backend=backend, mapped=mapped, progress=progress)
     records = trace.records
     T = records.z.shape[0]
