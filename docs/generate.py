@@ -334,7 +334,9 @@ def keys_page() -> str:
            "`python docs/generate.py` from the constructors' signatures (`REGISTRY` of "
            "`robotadapt.studies.scenarios.build`); tests/test_keys.py checks it is current. See "
            "[Scenario files](scenarios.md) for the layout. A section with unknown or missing keys is reported in one "
-           "message naming all of them.", ""]
+           "message naming all of them. Every section with a kind also takes `kind = \"module:Class\"`: a class or "
+           "function of your own, its keys its own parameters ([Tutorial](tutorial.md#from-scenario-files-and-the-"
+           "command-line)).", ""]
     where = {"robot": "robot", "trajectory": "trajectory", "controller": "controller", "servo": "controller.servo",
              "law": "controller.law"}
     zeros = {"phi_hat0": "zeros"}

@@ -18,7 +18,7 @@ import pytest
 from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import brentq
 
-from robotadapt._array import matvec
+from robotadapt.arrays import matvec
 from robotadapt.analysis.metrics import lyapunov_increase
 from robotadapt.controllers import InertiaRelated
 from robotadapt.controllers.adaptation import Gradient, LandauPI, SwitchingSigma

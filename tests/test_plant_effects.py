@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from robotadapt._array import array_namespace
+from robotadapt.arrays import array_namespace
 from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
 from robotadapt.plant.actuators import Actuator

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from robotadapt._array import rk4
+from robotadapt.arrays import rk4
 from robotadapt.plant.mujoco import load_mujoco
 from robotadapt.realtime import RealtimeController
 from robotadapt.studies.scenarios import load

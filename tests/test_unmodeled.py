@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robotadapt._array import matvec
+from robotadapt.arrays import matvec
 from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
 from robotadapt.plant.actuators import DCMotor

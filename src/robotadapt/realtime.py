@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ._array import array_namespace
+from .arrays import array_namespace
 from .controllers.base import HasDelayLine, Prepares
 from .plant.actuators import Actuator
 from .plant.sensors import Sensor

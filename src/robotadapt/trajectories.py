@@ -11,7 +11,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-from ._array import array_namespace
+from .arrays import array_namespace
 from .validation import ConfigError, as_array, as_scalar, as_vector
 
 Array = Any

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .._array import array_namespace
+from ..arrays import array_namespace
 
 if TYPE_CHECKING:
     from ..robots.base import RobotModel

@@ -17,7 +17,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .._array import array_namespace, quad
+from ..arrays import array_namespace, quad
 from ..validation import as_gain, as_scalar
 from .base import inverse
 

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from .._array import array_namespace, matvec
+from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from .base import Array, errors, estimate, gains

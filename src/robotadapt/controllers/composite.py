@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .._array import array_namespace, matvec
+from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from .._array import array_namespace, matvec, quad
+from ..arrays import array_namespace, matvec, quad
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from .._array import matvec, quad
+from ..arrays import matvec, quad
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from .base import Array, EstimateState, errors, estimate, gains, slotine_li_regressor

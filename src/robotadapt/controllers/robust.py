@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._array import array_namespace
+from ..arrays import array_namespace
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_scalar, as_vector

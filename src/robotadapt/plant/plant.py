@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._array import array_namespace, matvec, repeat, rk4, solve
+from ..arrays import array_namespace, matvec, repeat, rk4, solve
 from ..robots.base import RobotModel
 from ..validation import ConfigError, as_scalar, as_vector
 from .actuators import Actuator, DCMotor

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .._array import array_namespace
+from ..arrays import array_namespace
 from ..validation import ConfigError, as_scalar, as_vector
 
 Array = Any

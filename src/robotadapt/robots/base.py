@@ -12,7 +12,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
-from .._array import array_namespace, matvec, solve
+from ..arrays import array_namespace, matvec, solve
 
 Array = Any
 

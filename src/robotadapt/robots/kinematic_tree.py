@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from .._array import array_namespace
+from ..arrays import array_namespace
 from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
 from .base import Array, RobotModel
 from .dh import EXTRAS, LINK_KEYS, Geometry, SerialChain, joint_placements

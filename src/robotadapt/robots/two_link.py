@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .._array import array_namespace, matrix
+from ..arrays import array_namespace, matrix
 from ..validation import as_scalar, check_switch
 from .base import Array, RobotModel
 

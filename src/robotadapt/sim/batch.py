@@ -29,7 +29,7 @@ from ..plant.plant import Plant, SinusoidalDisturbance
 from ..trajectories import SumOfSines
 from ..validation import ConfigError, as_array, as_scalar, as_vector
 from .driver import drive
-from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
+from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend, run_on
 from .loop import MAX_LOG_BYTES, ClosedLoop, Ring, RK4Step
 from .outputs import batch_outputs, outputs
 from .result import SimulationResult
@@ -100,9 +100,10 @@ def stack(items: Sequence[T], name: str) -> T:
                 raise NotBatchable(f"{name}.{f.name}", "has different shapes in different runs")
             changes[f.name] = np.stack(arrays)
         else:
-            allowed = ", ".join(PER_RUN.get(cls, ())) or "nothing"
+            allowed = PER_RUN.get(cls, ())
             raise NotBatchable(f"{name}.{f.name}", f"differs between runs; in one batch {cls.__name__} varies only "
-                               f"{allowed} per run")
+                               f"{', '.join(allowed)} per run" if allowed else
+                               f"differs between runs; one batch holds one {cls.__name__}")
     out = copy.copy(first)
     for klass in cls.__mro__:
         for key, attr in vars(klass).items():
@@ -302,12 +303,7 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
         return drive(singles, [], feed, n_steps, log_every, backend=backend, stacked=(rk4, (z0, line)),
                      progress=progress)
 
-    try:
-        trace = run(backend)
-    except ConfigError as exc:  # "auto" steps a law whose code JAX cannot trace (a user's numpy code) with numpy
-        if integrator.backend != "auto" or exc.field != "simulation.backend":
-            raise
-        trace = run("numpy")
+    trace, _ = run_on(integrator.backend, backend, run)
     z = trace.records
     return BatchResult(dt * (log_every * np.arange(len(z))), z, trace.n_logged, tuple(trace.status), runs.plants,
                        controllers, runs.trajectories, time.perf_counter() - wall, dict(info or {}))
@@ -342,15 +338,9 @@ def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, m
     backend = choose_backend(opts.backend, n_ticks * N, traceable)
     wall = time.perf_counter()
     try:
-        try:
-            t, z, n_logged, status, logged = integrate_batch(loops, traj, z0, opts, n_ticks, log_every, max_state,
-                                                             progress, lines, backend)
-        except ConfigError as exc:  # "auto" steps a law whose code JAX cannot trace (a user's numpy code) with numpy
-            if opts.backend != "auto" or exc.field != "simulation.backend":
-                raise
-            backend = "numpy"
-            t, z, n_logged, status, logged = integrate_batch(loops, traj, z0, opts, n_ticks, log_every, max_state,
-                                                             progress, lines, backend)
+        (t, z, n_logged, status, logged), backend = run_on(
+            opts.backend, backend, lambda b: integrate_batch(loops, traj, z0, opts, n_ticks, log_every, max_state,
+                                                             progress, lines, b))
     except ConfigError as exc:
         if exc.field == "simulation":
             raise NotBatchable(exc.field, exc.reason) from None

@@ -26,7 +26,7 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-from .._array import array_namespace
+from ..arrays import array_namespace
 from ..validation import ConfigError
 from .compiled import float64, jax_module, rebuild, skeleton
 from .status import Status

@@ -7,13 +7,16 @@ that a plant's effects and stiffness suit the integrator.
 from __future__ import annotations
 
 import math
+import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from ..plant.plant import Plant
 from ..validation import ConfigError, as_scalar
 
 Array = Any
+T = TypeVar("T")
 
 
 BACKENDS = ("auto", "numpy", "jax")
@@ -34,6 +37,25 @@ def choose_backend(backend: str, steps: int, traceable: bool) -> str:
     if backend != "auto":
         return backend
     return "jax" if traceable and steps >= AUTO_MIN_STEPS else "numpy"
+
+
+class NotTraceableWarning(UserWarning):
+    """Under `backend = "auto"`, a law or model JAX could not trace was stepped with numpy instead (slower, same
+    numbers); docs/tutorial.md#traceable says what tracing needs and how to check a law."""
+
+
+def run_on(asked: str, backend: str, run: Callable[[str], T]) -> tuple[T, str]:
+    """`run(backend)` and the backend it ran on. Under "auto", a program JAX cannot trace (a ConfigError naming
+    `simulation.backend`, e.g. a user's law written with numpy calls) runs with numpy instead, with a
+    :class:`NotTraceableWarning` saying why; a backend asked for by name fails with the error."""
+    try:
+        return run(backend), backend
+    except ConfigError as exc:
+        if asked != "auto" or backend == "numpy" or exc.field != "simulation.backend":
+            raise
+        warnings.warn(f"{exc.reason}; stepped with numpy instead (simulation.backend = 'auto'): slower, same numbers — "
+                      "docs/tutorial.md#traceable", NotTraceableWarning, stacklevel=3)
+        return run("numpy"), "numpy"
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .._array import array_namespace, matvec
+from ..arrays import array_namespace, matvec
 from ..controllers.base import FiltersTorque, HasGuard, HasInstantEstimate, HasProjection, HasRegressor, NeedsAcceleration
 from ..plant.plant import Plant, same_model
 from ..trajectories import Reference, Trajectory

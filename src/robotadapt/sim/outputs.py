@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .._array import matvec
+from ..arrays import matvec
 from ..controllers.base import HasFilteredError, HasInstantEstimate, HasLyapunov
 from ..trajectories import Reference, Trajectory
 from ..validation import ConfigError

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from .._array import array_namespace, repeat, rk4
+from ..arrays import array_namespace, repeat, rk4
 from ..controllers.base import FiltersTorque, HasProjection
 from ..plant.actuators import Actuator
 from ..plant.sensors import Sensor

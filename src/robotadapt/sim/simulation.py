@@ -20,7 +20,7 @@ from ..plant.plant import Plant, same_model
 from ..trajectories import Trajectory
 from ..validation import ConfigError, as_scalar, as_vector
 from .driver import drive
-from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend
+from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend, run_on
 from .loop import MAX_LOG_BYTES, ClosedLoop, DelayLine, Ring, RK4Step
 from .outputs import outputs
 from .result import SimulationResult
@@ -171,7 +171,7 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     if effects:
         info["plant"] = effects
     wall = time.perf_counter()
-    logged = None
+    logged: dict[str, Array] | None = None
     if isinstance(integrator, SolveIVP):
         if integrator.backend == "jax":  # "auto" keeps scipy, the reference (sim/compiled_ivp.py)
             from .compiled_ivp import integrate_ivp
@@ -201,13 +201,7 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
 
         if isinstance(integrator, Sampled):
             info["sampling"] = integrator.describe()
-        try:
-            t, z, status, logged = run(backend)
-        except ConfigError as exc:  # "auto" steps a law whose code JAX cannot trace (a user's numpy code) with numpy
-            if integrator.backend != "auto" or exc.field != "simulation.backend":
-                raise
-            backend = "numpy"
-            t, z, status, logged = run(backend)
+        (t, z, status, logged), backend = run_on(integrator.backend, backend, run)
         info["backend"] = backend
     wall = time.perf_counter() - wall
     with np.errstate(all="ignore"):  # a diverged run's last samples may overflow in the recomputed outputs

@@ -7,12 +7,15 @@ key is an error that lists the known ones, and a missing required key names itse
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import inspect
 import json
 import os
+import sys
 from collections.abc import Callable
 from dataclasses import MISSING, dataclass, field, fields, is_dataclass
 from functools import cache
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -79,12 +82,62 @@ CANONICAL = {"robot": "robot", "trajectory": "trajectory", "controller": "contro
 FIRST_ARG = {"model": "model", "n": "n", "p": "p"}
 
 
+# what a user's constructor (`kind = "module:attribute"`) takes first, by registry: as the packaged kinds do
+USER_FIRST: dict[str, str | None] = {"robot": None, "trajectory": "n", "controller": "model", "servo": "n", "law": "p"}
+
+
 def _resolve(target: str) -> Callable[..., Any]:
     module, _, attr = target.partition(":")
     obj: Any = importlib.import_module(f"robotadapt.{module}")
     for part in attr.split("."):
         obj = getattr(obj, part)
     return obj
+
+
+def _user_module(module: str, name: str) -> Any:
+    """The module of a user's `kind = "module:attribute"`: importable from the Python path, or a `module.py` file in the
+    current folder (the console script `robotadapt` does not put the folder on the path)."""
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        local = Path.cwd() / f"{module}.py"
+        if exc.name != module.partition(".")[0] or "." in module or not local.is_file():
+            raise ConfigError(name, f"cannot import {module!r} ({exc}): install it, add its folder to PYTHONPATH or "
+                              f"run from the folder that holds {module.split('.')[0]}.py") from None
+    if module not in sys.modules:  # loaded once per process, under its own name (so its objects pickle by reference)
+        spec = importlib.util.spec_from_file_location(module, local)
+        loaded = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+        sys.modules[module] = loaded
+        try:
+            spec.loader.exec_module(loaded)  # type: ignore[union-attr]
+        except BaseException:
+            del sys.modules[module]
+            raise
+    return sys.modules[module]
+
+
+def constructor(registry: str, kind: Any, name: str) -> tuple[Callable[..., Any], str | None]:
+    """The constructor `kind` names in `registry` and what it takes first (the model, n, p or nothing): a packaged kind
+    of `REGISTRY` (or an alias), or a user's `"module:attribute"` (a class or function of an importable module, e.g.
+    `"deadzone:DeadZoneSlotineLi"`, taking first what the registry's packaged kinds take, `USER_FIRST`; docs/tutorial.md).
+    `name` is the field an error names (`controller.kind`)."""
+    table = REGISTRY[registry]
+    kind = canonical_kind(registry, kind)
+    if isinstance(kind, str) and kind in table:
+        target, first = table[kind]
+        return _resolve(target), first
+    if not (isinstance(kind, str) and kind.count(":") == 1 and all(kind.split(":"))):
+        known = sorted([*table, *ALIASES.get(registry, {})])
+        raise ConfigError(name, f"expected one of {', '.join(known)}, or \"module:Class\" for your own; got {kind!r}")
+    module, attr = kind.split(":")
+    obj: Any = _user_module(module, name)
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            raise ConfigError(name, f"module {module!r} has no {attr!r}")
+        obj = getattr(obj, part)
+    if not callable(obj):
+        raise ConfigError(name, f"{kind!r} is not a class or function")
+    return obj, USER_FIRST[registry]
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,8 +181,8 @@ def _signature(ctor: Callable[..., Any], first: str | None) -> dict[str, Any]:
 
 def keys(registry: str, kind: str) -> dict[str, Any]:
     """The keys a `kind` of `registry` takes → default (REQUIRED when it has none): the constructor's signature."""
-    target, first = REGISTRY[registry][canonical_kind(registry, kind)]
-    return dict(_signature(_resolve(target), first))
+    ctor, first = constructor(registry, kind, f"{registry}.kind")
+    return dict(_signature(ctor, first))
 
 
 def plain(value: Any) -> Any:
@@ -184,15 +237,9 @@ def per_parameter(value: Any, model: RobotModel, field: str, *, broadcast: bool)
 def build(registry: str, section: Any, name: str, model: RobotModel | None = None) -> Any:
     """Call the constructor that `section['kind']` names in `REGISTRY[registry]` with the section's other keys; nested
     tables (servo, law, base) are built first. `phi_hat0` defaults to zeros; a plain number is that value for all."""
-    table = REGISTRY[registry]
     if not isinstance(section, dict):
-        raise ConfigError(name, f"expected a table with a kind ({', '.join(sorted(table))}), got {section!r}")
-    kind = canonical_kind(registry, section.get("kind"))
-    if not isinstance(kind, str) or kind not in table:
-        known = sorted([*table, *ALIASES.get(registry, {})])
-        raise ConfigError(f"{name}.kind", f"expected one of {', '.join(known)}; got {section.get('kind')!r}")
-    target, first = table[kind]
-    ctor = _resolve(target)
+        raise ConfigError(name, f"expected a table with a kind ({', '.join(sorted(REGISTRY[registry]))}), got {section!r}")
+    ctor, first = constructor(registry, section.get("kind"), f"{name}.kind")
     params = _params(ctor, first)
     keys = {k: v for k, v in section.items() if k != "kind"}
     estimated = "phi_hat0" in params and model is not None
@@ -216,8 +263,8 @@ def build(registry: str, section: Any, name: str, model: RobotModel | None = Non
 def resolved(registry: str, section: dict[str, Any], model: RobotModel | None = None) -> dict[str, Any]:
     """A section that built, with every default its constructor used written out (nested tables too), so that the
     written scenario reproduces the run if a default changes."""
-    target, first = REGISTRY[registry][canonical_kind(registry, section["kind"])]
-    defaults = _signature(_resolve(target), first)
+    ctor, first = constructor(registry, section["kind"], f"{registry}.kind")
+    defaults = _signature(ctor, first)
     out = _with_defaults(section, defaults)
     if "phi_hat0" in defaults and model is not None and "phi_hat0" not in out:
         out["phi_hat0"] = [0.0] * model.p
@@ -237,10 +284,9 @@ def _robot_key(section: Any) -> str | None:
     names; None if it is not plain data."""
     try:
         key = json.dumps(section, sort_keys=True)
-        target, _ = REGISTRY["robot"][canonical_kind("robot", section["kind"])]
-    except (TypeError, ValueError, KeyError):
+        ctor, _ = constructor("robot", section["kind"], "robot.kind")
+    except (TypeError, ValueError, KeyError, ConfigError):
         return None
-    ctor = _resolve(target)
     ctor = getattr(ctor, "__init__", ctor) if isinstance(ctor, type) else ctor
     key += f"|{ctor.__defaults__!r}|{ctor.__kwdefaults__!r}"
     path = section.get("path") if isinstance(section, dict) else None

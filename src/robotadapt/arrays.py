@@ -1,6 +1,7 @@
-"""Array helpers shared by models and controllers, written against the array API (numpy today, JAX later).
+"""Array helpers for models and controllers that run on numpy and compile with JAX alike (the array API).
 
-No function here assigns into an array; each takes the namespace `xp` of its inputs.
+A law written with these and the namespace `xp = array_namespace(q, dq, x)` of its inputs is *traceable*: JAX can
+compile its loop (docs/tutorial.md#traceable). No function here assigns into an array.
 """
 
 from __future__ import annotations
