@@ -18,8 +18,8 @@ import pytest
 from scipy.integrate import cumulative_trapezoid
 from scipy.optimize import brentq
 
-from robotadapt.arrays import matvec
 from robotadapt.analysis.metrics import lyapunov_increase
+from robotadapt.arrays import matvec
 from robotadapt.controllers import InertiaRelated
 from robotadapt.controllers.adaptation import Gradient, LandauPI, SwitchingSigma
 from robotadapt.controllers.passivity import PassivityBased, ServoFilter, pd_servo, pid_servo, state_space_servo

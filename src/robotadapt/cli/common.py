@@ -1,9 +1,12 @@
-"""Pieces several commands share: scenario arguments and the one-line run summary."""
+"""Pieces several commands share: scenario arguments, figure arguments and the one-line run summary."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Any
+
+from ..report.output import DEFAULT_DPI, FORMATS, FigureFormat
+from ..validation import ConfigError
 
 
 def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,6 +30,25 @@ def overrides(args: argparse.Namespace) -> list[str]:
         if getattr(args, name, None) is not None:
             out.append(f"simulation.{name}={getattr(args, name)!r}")
     return out
+
+
+def add_figure_arguments(parser: argparse.ArgumentParser) -> None:
+    """`--format` and `--dpi`: how the command writes its figures (read back by :func:`figure_format`)."""
+    parser.add_argument("--format", default="png", metavar="{" + ",".join(FORMATS) + "}",
+                        help="file format of the figures (default png); pdf and svg are vector graphics, for papers")
+    parser.add_argument("--dpi", default=DEFAULT_DPI, metavar="N",
+                        help=f"resolution of the figures in dots per inch (default {DEFAULT_DPI}); in pdf and svg it "
+                             "sets only the rasterised parts")
+
+
+def figure_format(args: argparse.Namespace) -> FigureFormat:
+    """The figures' format and dpi asked on the command line; a bad value is a ConfigError naming its option (checked
+    before any run, so a typo costs no simulation)."""
+    try:
+        dpi = int(args.dpi)
+    except ValueError:
+        raise ConfigError("--dpi", f"expected a positive whole number of dots per inch, got {args.dpi!r}") from None
+    return FigureFormat(args.format, dpi)
 
 
 def fmt(values: list[float]) -> str:

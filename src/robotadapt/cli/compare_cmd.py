@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import add_scenario_arguments, overrides
+from .common import add_figure_arguments, add_scenario_arguments, figure_format, overrides
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -24,6 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     compare.add_argument("--tune-runs", type=int, default=30, metavar="N",
                          help="with --fair: most differentiated runs per law (default 30)")
     compare.add_argument("--out", type=Path, help="output folder (default: results/NAME/compare, or compare-fair)")
+    add_figure_arguments(compare)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -33,6 +34,7 @@ def main(args: argparse.Namespace) -> int:
     from ..studies.scenarios import load
     from ..validation import ConfigError
 
+    output = figure_format(args)
     names = None
     if args.controllers is not None:
         names = [n.strip() for n in args.controllers.split(",")]
@@ -52,7 +54,7 @@ def main(args: argparse.Namespace) -> int:
     folder = "compare-fair" if args.fair else "compare"
     out = args.out if args.out is not None else Path("results") / base.name / folder
     budget = {"objective": args.objective, "max_torque": args.max_torque} if args.fair else None
-    path = write_comparison(base, rows, skipped, out, budget)
+    path = write_comparison(base, rows, skipped, out, budget, output)
     print(table_text(rows))
     for name, reason in skipped.items():
         print(f"not applicable: {name}: {reason}")

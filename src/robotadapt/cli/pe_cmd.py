@@ -7,7 +7,7 @@ import argparse
 import json
 from pathlib import Path
 
-from .common import add_scenario_arguments, fmt, overrides
+from .common import add_figure_arguments, add_scenario_arguments, figure_format, fmt, overrides
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -16,8 +16,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     pe.add_argument("--window", type=float, metavar="RHO",
                     help="window length ρ in s (default: the trajectory's period, else a quarter of the horizon)")
     pe.add_argument("--json", action="store_true", help="print one JSON object instead of the text verdict")
-    pe.add_argument("--out", type=Path, help="folder for pe.png and pe.json (default: results/NAME)")
-    pe.add_argument("--no-plots", action="store_true", help="skip pe.png")
+    pe.add_argument("--out", type=Path, help="folder for pe.json and the figure pe.png (default: results/NAME)")
+    pe.add_argument("--no-plots", action="store_true", help="skip the figure pe.png")
+    add_figure_arguments(pe)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -26,6 +27,7 @@ def main(args: argparse.Namespace) -> int:
     from ..files import atomic_write, writable_dir
     from ..studies.scenarios import load
 
+    output = figure_format(args)
     scenario = load(args.scenario, overrides(args))
     s = scenario.setup
     exc = excitation(s.controller.model, s.trajectory, s.t_final, args.window)
@@ -35,7 +37,7 @@ def main(args: argparse.Namespace) -> int:
     if not args.no_plots:
         from ..report.html import excitation_figure
 
-        excitation_figure(exc, out / "pe.png", scenario.name)
+        excitation_figure(exc, out / output.name("pe"), scenario.name, output)
     if args.json:
         print(json.dumps(verdict))
         return 0

@@ -1,5 +1,5 @@
 """`robotadapt sweep`: a scenario over a grid × random draws, on local processes or a Dask scheduler, resumable;
-writes runs.jsonl (one row per run), sweep.json and sweep.png."""
+writes runs.jsonl (one row per run), sweep.json and sweep.png (or .pdf, .svg: --format)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from .common import add_scenario_arguments, overrides
+from .common import add_figure_arguments, add_scenario_arguments, figure_format, overrides
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -27,7 +27,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--metric", default="rms_error_norm",
                    help="metric of the summary figure and the best run (default rms_error_norm = sqrt(mean ‖e‖²))")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: results/sweep-NAME)")
-    p.add_argument("--no-plots", action="store_true", help="skip sweep.png")
+    p.add_argument("--no-plots", action="store_true", help="skip the figure sweep.png")
+    add_figure_arguments(p)
 
 
 def _summary(rows: list[dict[str, Any]], keys: list[str], metric: str) -> str:
@@ -53,6 +54,7 @@ def main(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise ConfigError("--workers", f"must be at least 1, got {args.workers}")
+    output = figure_format(args)
     scenario = load(args.scenario, overrides(args))
     sweep = make_sweep(scenario, args.grid, args.random, args.n, args.seed)
     out = args.out if args.out is not None else Path("results") / f"sweep-{scenario.name}"
@@ -61,7 +63,8 @@ def main(args: argparse.Namespace) -> int:
     if not args.no_plots:
         from ..report.sweep_figures import summary_figure
 
-        summary_figure(report.rows, sweep.keys, args.metric, Path(out) / FIGURE, sweep.name)
+        summary_figure(report.rows, sweep.keys, args.metric, Path(out) / output.name(FIGURE), sweep.name,
+                       output=output)
     rate = f", {report.computed / report.seconds:.3g} runs/s" if report.computed else ""
     print(f"sweep {scenario.name}: {len(sweep)} runs ({report.computed} now, {len(sweep) - report.computed} already "
           f"in the table) in {report.seconds:.3g} s{rate}" + (f"; {report.how}" if report.how else ""))

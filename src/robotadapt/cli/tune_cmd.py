@@ -1,5 +1,5 @@
 """`robotadapt tune`: tune a scenario's gains by gradients through the closed loop under a torque budget; writes
-tuned.toml (runnable by `robotadapt run`), tune.json and tune.png (docs/tuning.md)."""
+tuned.toml (runnable by `robotadapt run`), tune.json and tune.png (or .pdf, .svg: --format; docs/tuning.md)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import argparse
 import json
 from pathlib import Path
 
-from .common import add_scenario_arguments, overrides
+from .common import add_figure_arguments, add_scenario_arguments, figure_format, overrides
 
 EXIT_BUDGET = 1
 
@@ -35,7 +35,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="draw the objective over a K×K grid of the first two scalar gains (K² forward runs); default 9 "
                         "when exactly two scalar gains are tuned, else none; 0: none")
     p.add_argument("--out", type=Path, metavar="DIR", help="output folder (default: results/tune-NAME)")
-    p.add_argument("--no-plots", action="store_true", help="skip tune.png")
+    p.add_argument("--no-plots", action="store_true", help="skip the figure tune.png")
+    add_figure_arguments(p)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -43,6 +44,7 @@ def main(args: argparse.Namespace) -> int:
     from ..studies.scenarios import load
     from ..studies.tune import tune
 
+    output = figure_format(args)
     scenario = load(args.scenario, overrides(args))
     out = writable_dir(args.out if args.out is not None else Path("results") / f"tune-{scenario.name}")
     tuned = tune(scenario, args.vary, args.objective, args.max_torque, over=args.over, samples=args.samples,
@@ -56,7 +58,7 @@ def main(args: argparse.Namespace) -> int:
     if not args.no_plots:
         from ..report.tune_figures import tune_figure
 
-        tune_figure(tuned, out / "tune.png")
+        tune_figure(tuned, out / output.name("tune"), output)
     gains = ", ".join(f"{k} = {v}" for k, v in summary["gains"].items())
     print(f"tune {scenario.name}: {summary['objective_expression']} {tuned.before.objective:.4g} -> "
           f"{tuned.after.objective:.4g}, max |τ| {tuned.before.max_abs_torque:.4g} -> {tuned.after.max_abs_torque:.4g}"

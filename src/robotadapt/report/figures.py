@@ -1,11 +1,12 @@
-"""Book-style figures of a run: tracking error, parameter estimates against the truth, torques (one PNG each), and
+"""Book-style figures of a run: tracking error, parameter estimates against the truth, torques (one file each), and
 the overlays of a one-at-a-time study.
 
 Axes carry units: rad or m per joint type (revolute or prismatic), N·m or N for the control input, and per parameter
 the unit its name implies (kg for masses, kg·m for first moments, kg·m² for inertias, N·m·s/rad or N·s/m for viscous
 friction, N·m or N for Coulomb friction). The joint types come from the model (:func:`joint_types`); without a model
 the axes say "rad or m". Symbols are matplotlib mathtext ($e_1$, $\\hat\\varphi$). Each `*_figure` function returns the
-matplotlib Figure (to inspect or save elsewhere); the functions without the suffix write the PNG and close it.
+matplotlib Figure (to inspect or save elsewhere); the functions without the suffix write it (PNG unless their `output`,
+a :class:`~robotadapt.report.output.FigureFormat`, says otherwise) and close it.
 """
 
 from __future__ import annotations
@@ -22,8 +23,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..files import atomic_write, writable_dir  # noqa: E402
+from ..files import writable_dir  # noqa: E402
 from ..studies.compare import number_text  # noqa: E402
+from .output import PNG, FigureFormat, save_figure  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -174,12 +176,6 @@ def legend(ax: Any) -> None:
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0)
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
-    plt.close(fig)
-    return path
-
-
 def _title(title: str, what: str) -> str:
     return f"{title} — {what}" if title else what[:1].upper() + what[1:]
 
@@ -313,29 +309,35 @@ def parameters_figure(res: SimulationResult, title: str = "", model: Any = None)
     return _finish(fig, axes, _title(title, f"parameter {what}"))
 
 
-def tracking_error(res: SimulationResult, path: Path, title: str = "", model: Any = None) -> Path:
-    """Write :func:`tracking_error_figure` to `path`."""
-    return _save(tracking_error_figure(res, title, model), path)
+def tracking_error(res: SimulationResult, path: Path, title: str = "", model: Any = None,
+                   output: FigureFormat = PNG) -> Path:
+    """Write :func:`tracking_error_figure` to `path` in `output`'s format."""
+    return save_figure(tracking_error_figure(res, title, model), path, output)
 
 
-def parameters(res: SimulationResult, path: Path, title: str = "", model: Any = None) -> Path:
-    """Write :func:`parameters_figure` to `path`."""
-    return _save(parameters_figure(res, title, model), path)
+def parameters(res: SimulationResult, path: Path, title: str = "", model: Any = None,
+               output: FigureFormat = PNG) -> Path:
+    """Write :func:`parameters_figure` to `path` in `output`'s format."""
+    return save_figure(parameters_figure(res, title, model), path, output)
 
 
-def torques(res: SimulationResult, path: Path, title: str = "", model: Any = None) -> Path:
-    """Write :func:`torques_figure` to `path`."""
-    return _save(torques_figure(res, title, model), path)
+def torques(res: SimulationResult, path: Path, title: str = "", model: Any = None,
+            output: FigureFormat = PNG) -> Path:
+    """Write :func:`torques_figure` to `path` in `output`'s format."""
+    return save_figure(torques_figure(res, title, model), path, output)
+
+
+#: the figures of one run, by file stem (`save_figures`, the gallery)
+RUN_FIGURES = ("tracking_error", "parameters", "torques")
 
 
 def save_figures(res: SimulationResult, directory: str | os.PathLike[str], title: str = "",
-                 model: Any = None) -> list[Path]:
-    """Write `tracking_error.png`, `parameters.png` and `torques.png` into `directory`; `model` (the controller's)
-    gives the units (joint types, parameter units), else the axes say "rad or m"."""
+                 model: Any = None, output: FigureFormat = PNG) -> list[Path]:
+    """Write `tracking_error.png`, `parameters.png` and `torques.png` (the suffix `output`'s format) into `directory`;
+    `model` (the controller's) gives the units (joint types, parameter units), else the axes say "rad or m"."""
     directory = writable_dir(directory)
-    return [tracking_error(res, directory / "tracking_error.png", title, model),
-            parameters(res, directory / "parameters.png", title, model),
-            torques(res, directory / "torques.png", title, model)]
+    return [write(res, directory / output.name(stem), title, model, output)
+            for stem, write in zip(RUN_FIGURES, (tracking_error, parameters, torques), strict=True)]
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -374,6 +376,7 @@ def study_style(runs: list[Any], i: int) -> dict[str, Any]:
     return line
 
 
-def study(key: str, runs: list[Any], path: Path, title: str = "", model: Any = None) -> Path:
-    """Write :func:`study_figure` to `path`."""
-    return _save(study_figure(key, runs, title, model), path)
+def study(key: str, runs: list[Any], path: Path, title: str = "", model: Any = None,
+          output: FigureFormat = PNG) -> Path:
+    """Write :func:`study_figure` to `path` in `output`'s format."""
+    return save_figure(study_figure(key, runs, title, model), path, output)

@@ -11,12 +11,10 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 import json
 import time
 import unicodedata
-from dataclasses import dataclass
-from functools import partial
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,8 +29,9 @@ from ..analysis.metrics import metrics  # noqa: E402
 from ..files import atomic_write, writable_dir  # noqa: E402
 from ..studies.compare import Row, flat, number_text  # noqa: E402
 from ..studies.scenarios import Scenario, book_scenarios, load  # noqa: E402
-from .figures import EFFORT, POSITION, joint_types, norm_unit, positive, save_figures, style  # noqa: E402
+from .figures import EFFORT, POSITION, RUN_FIGURES, joint_types, norm_unit, positive, save_figures, style  # noqa: E402
 from .files import save_result  # noqa: E402
+from .output import PNG, FigureFormat, render, save_figure  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -48,17 +47,12 @@ def _page(title: str, body: str) -> str:
             f"<style>{_STYLE}</style></head>\n<body>\n<h1>{html.escape(title)}</h1>\n{body}\n</body></html>\n")
 
 
-def _png(fig: Any) -> bytes:
-    """A figure as PNG bytes, closing it."""
-    buf = io.BytesIO()
-    fig.tight_layout()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    return buf.getvalue()
+#: the media types of the figure formats a browser shows in an <img> (a pdf it does not)
+IMAGE_TYPES = {"png": "image/png", "svg": "image/svg+xml"}
 
 
-def _data_uri(png: bytes) -> str:
-    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+def _data_uri(data: bytes, format: str) -> str:
+    return f"data:{IMAGE_TYPES[format]};base64," + base64.b64encode(data).decode("ascii")
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -137,13 +131,11 @@ def excitation_plot(exc: Excitation, title: str = "") -> Figure:
     return fig
 
 
-def excitation_figure(exc: Excitation, path: Path, title: str = "") -> Path:
+def excitation_figure(exc: Excitation, path: Path, title: str = "", output: FigureFormat = PNG) -> Path:
     """α(t0), β(t0) of the windowed Gram matrix (6.5.2) with the PE threshold, and the extreme eigenvalues of the
-    growing integral ∫_0^t Y_dᵀ Y_d (6.6.18); log scale, zero drawn at the bottom of the axis."""
-    fig = excitation_plot(exc, title)
-    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
-    plt.close(fig)
-    return path
+    growing integral ∫_0^t Y_dᵀ Y_d (6.6.18); log scale, zero drawn at the bottom of the axis; written to `path` in
+    `output`'s format."""
+    return save_figure(excitation_plot(exc, title), path, output)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -164,9 +156,11 @@ class GalleryEntry:
     wall_time: float
 
 
-def run_gallery(out: Path, t_final_cap: float | None = None, progress: bool = False) -> list[GalleryEntry]:
+def run_gallery(out: Path, t_final_cap: float | None = None, progress: bool = False,
+                output: FigureFormat = PNG) -> list[GalleryEntry]:
     """Run every book scenario (capped at `t_final_cap` seconds of simulated time if given), write into out/NAME/ what
-    `robotadapt run` writes (result.npz, metrics.json, scenario.toml and the three figures), and index.html into `out`."""
+    `robotadapt run` writes (result.npz, metrics.json, scenario.toml and the three figures, in `output`'s format), and
+    index.html into `out`."""
     out = writable_dir(out)
     entries = []
     for name in book_scenarios():
@@ -177,7 +171,7 @@ def run_gallery(out: Path, t_final_cap: float | None = None, progress: bool = Fa
         wall = time.perf_counter()
         res = scenario.run(progress)
         save_figures(res, save_result(res, out / name, scenario.text), name,  # what `robotadapt run` writes
-                     scenario.setup.controller.model)
+                     scenario.setup.controller.model, output)
         wall = time.perf_counter() - wall
         entries.append(GalleryEntry(name, scenario.description, str(scenario.data.get("notes", "")),
                                     {k: scenario.data[k] for k in ("robot", "plant", "trajectory", "controller",
@@ -185,12 +179,21 @@ def run_gallery(out: Path, t_final_cap: float | None = None, progress: bool = Fa
                                     metrics(res), scenario.setup.t_final, t_scenario, wall))
         if progress:
             print(f"{name}: {res.status}, {wall:.1f} s", flush=True)
-    atomic_write(out / "index.html", lambda f: f.write(gallery_html(entries)))
+    atomic_write(out / "index.html", lambda f: f.write(gallery_html(entries, output)))
     return entries
 
 
-def gallery_html(entries: list[GalleryEntry]) -> str:
-    """The gallery page: per example its description, notes, settings, metrics and the three figures."""
+def _gallery_figure(path: str, alt: str, format: str) -> str:
+    """One figure of the gallery: an image (png, svg), or for a pdf, which a browser does not show in an <img>, a link
+    that opens it."""
+    if format in IMAGE_TYPES:
+        return f'<img src="{path}" alt="{alt}">'
+    return f'<a href="{path}">{alt} ({format})</a>'
+
+
+def gallery_html(entries: list[GalleryEntry], output: FigureFormat = PNG) -> str:
+    """The gallery page: per example its description, notes, settings, metrics and the three figures (the files
+    written in `output`'s format)."""
     total = sum(e.wall_time for e in entries)
     capped = [e.name for e in entries if e.t_final < e.t_scenario]
     parts = [f"<p>{len(entries)} scenarios of the book's chapter 6 and §7.2 (examples and problems), generated by "
@@ -209,8 +212,8 @@ def gallery_html(entries: list[GalleryEntry]) -> str:
                            for k, v in e.settings.items())
         metrics = "".join(f"<tr><th class=\"l\">{html.escape(k)}</th><td class=\"l\">{html.escape(number_text(v))}</td></tr>"
                           for k, v in e.metrics.items())
-        figs = "".join(f'<img src="{e.name}/{f}.png" alt="{e.name} {f.replace("_", " ")}">'
-                       for f in ("tracking_error", "parameters", "torques"))
+        figs = "".join(_gallery_figure(f"{e.name}/{output.name(f)}", f"{e.name} {f.replace('_', ' ')}", output.format)
+                       for f in RUN_FIGURES)
         parts.append(f'<section id="{e.name}" data-scenario="{e.name}"><h2>{e.name}</h2>'
                      f"<p>{html.escape(e.description)}</p><p><small>{html.escape(e.notes)}</small></p>{cap}"
                      f'<div class="figs">{figs}</div><h3>Settings</h3><table>{settings}</table>'
@@ -250,10 +253,6 @@ def table_text(rows: list[Row]) -> str:
     widths = [max(display_width(c[i]) for c in cells) for i in range(len(COLUMNS))]
     return "\n".join("  ".join(_pad(c, w, i == 0) for i, (c, w) in enumerate(zip(line, widths, strict=True)))
                      for line in cells)
-
-
-def _write_bytes(data: bytes, f: Any) -> None:
-    f.write(data)
 
 
 #: the panels of the comparison figures: lineup names by family; a name in none (the scenario's own law) goes last
@@ -319,11 +318,6 @@ def overlay_figure(rows: list[Row], signal: str) -> Figure:
     fig.suptitle(OVERLAYS[{"e": "errors", "phi": "parameter_errors", "tau": "torques"}[signal]][1])
     fig.tight_layout()
     return fig
-
-
-def _overlay(rows: list[Row], signal: str) -> bytes:
-    """:func:`overlay_figure` as PNG bytes."""
-    return _png(overlay_figure(rows, signal))
 
 
 def laws_figure(rows: list[Row], max_torque: float | None = None) -> Figure:
@@ -392,11 +386,11 @@ def _gains_text(budget: dict[str, Any] | None, rows: list[Row]) -> str:
                                          " Every law stays within the budget."))
 
 
-def comparison_html(base: Scenario, rows: list[Row], skipped: dict[str, str], figures: dict[str, bytes],
+def comparison_html(base: Scenario, rows: list[Row], skipped: dict[str, str], figures: dict[str, str],
                     budget: dict[str, Any] | None = None) -> str:
-    """The self-contained report: setting, table (one row per controller), definitions, the `OVERLAYS` figures
-    (PNG bytes by name) embedded; with `budget` (objective, max_torque) the gains are the fair comparison's tuned
-    ones."""
+    """The self-contained report: setting, table (one row per controller), definitions, the `OVERLAYS` figures and
+    "laws" embedded (data URIs by name); with `budget` (objective, max_torque) the gains are the fair comparison's
+    tuned ones."""
     s = base.setup
     head = "".join(f'<th{" class=l" if k == "label" else ""}>{html.escape(t)}</th>' for k, t, _ in COLUMNS)
     body = "".join(
@@ -409,7 +403,7 @@ def comparison_html(base: Scenario, rows: list[Row], skipped: dict[str, str], fi
     setting = "".join(f"<li>{k}: <code>{html.escape(', '.join(flat(base.data[k])))}</code></li>"
                       for k in ("robot", "plant", "trajectory", "simulation"))
     skip = "".join(f"<li>{html.escape(k)}: {html.escape(v)}</li>" for k, v in skipped.items())
-    images = "".join(f'<h3>{title}</h3><img alt="{title}" src="{_data_uri(figures[name])}">'
+    images = "".join(f'<h3>{title}</h3><img alt="{title}" src="{figures[name]}">'
                      for name, title in [(n, t) for n, (_, t) in OVERLAYS.items()] + [("laws", LAWS_TITLE)])
     body_html = f"""<p>Scenario <b>{html.escape(base.name)}</b>: {html.escape(base.description)}</p>
 <p>Every controller runs on the same arm ({type(s.plant.model).__name__}, φ = {number_text(s.plant.phi.tolist())}), desired
@@ -429,16 +423,23 @@ the whole simulation (controller, plant and RK4 stages) divided by the number of
 
 
 def write_comparison(base: Scenario, rows: list[Row], skipped: dict[str, str], out: Path,
-                     budget: dict[str, Any] | None = None) -> Path:
+                     budget: dict[str, Any] | None = None, output: FigureFormat = PNG) -> Path:
     """Write report.html (self-contained), comparison.json, the overlaid figures errors.png, parameter_errors.png,
-    torques.png and the small multiples laws.png into `out`; returns the report's path. `budget`: the fair comparison's
-    objective and torque budget."""
+    torques.png and the small multiples laws.png (the suffix `output`'s format) into `out`; returns the report's path.
+    `budget`: the fair comparison's objective and torque budget.
+
+    The report embeds the very files when a browser shows them in an <img> (png, svg: data URIs, so that the ids
+    inside one svg cannot clash with another's); for pdf it embeds a PNG drawn at the same dpi."""
     out = writable_dir(out)
-    figures = {name: _overlay(rows, signal) for name, (signal, _) in OVERLAYS.items()}
-    figures["laws"] = _png(laws_figure(rows, None if budget is None else budget["max_torque"]))
-    for name, png in figures.items():
-        atomic_write(out / f"{name}.png", partial(_write_bytes, png), binary=True)
+    figures = {name: overlay_figure(rows, signal) for name, (signal, _) in OVERLAYS.items()}
+    figures["laws"] = laws_figure(rows, None if budget is None else budget["max_torque"])
+    shown = output if output.format in IMAGE_TYPES else replace(output, format="png")
+    images = {}
+    for name, fig in figures.items():
+        drawn = None if shown == output else render(fig, shown)
+        path = save_figure(fig, out / output.name(name), output)
+        images[name] = _data_uri(path.read_bytes() if drawn is None else drawn, shown.format)
     atomic_write(out / "comparison.json", lambda f: json.dump(
         {"scenario": base.name, "fair": budget, "rows": [r.metrics for r in rows], "skipped": skipped}, f, indent=2))
-    atomic_write(out / "report.html", lambda f: f.write(comparison_html(base, rows, skipped, figures, budget)))
+    atomic_write(out / "report.html", lambda f: f.write(comparison_html(base, rows, skipped, images, budget)))
     return out / "report.html"

@@ -9,20 +9,20 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_write
 from ..plant.mujoco import MujocoPlant, option_columns
 from ..robots.base import RobotModel
 from ..sim.result import SimulationResult
 from .figures import plt, style
+from .output import PNG, FigureFormat, save_figure
 
 UNITS = {"armature": ("rotor inertia $I_a$", "kg·m²"), "damping": ("viscous friction $f_v$", "N·m·s/rad"),
          "frictionloss": ("dry friction $f_c$", "N·m")}
 
 
 def option_estimates(result: SimulationResult, plant: MujocoPlant, model: RobotModel, path: Path,
-                     title: str = "") -> Path | None:
-    """Write the figure (one panel per option the controller's `model` estimates) to `path`; None when it estimates
-    none of them."""
+                     title: str = "", output: FigureFormat = PNG) -> Path | None:
+    """Write the figure (one panel per option the controller's `model` estimates) to `path` in `output`'s format;
+    None when it estimates none of them."""
     mj_model, _, _, vadr = plant.engine
     columns = {name: index for name, index in option_columns(model).items() if np.any(index >= 0)}
     if not columns or result.phi_hat.shape[-1] != model.p:
@@ -42,7 +42,5 @@ def option_estimates(result: SimulationResult, plant: MujocoPlant, model: RobotM
     axes[-1, 0].set_xlabel("time $t$ (s)")
     fig.suptitle(f"{title} — MuJoCo's joint options" if title else "MuJoCo's joint options")
     fig.tight_layout()
-    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, output)
 

@@ -18,10 +18,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..files import atomic_write  # noqa: E402
 from ..studies.compare import number_text  # noqa: E402
 from ..studies.sweep import scalar  # noqa: E402
 from .figures import parameter_unit, tex_name  # noqa: E402
+from .output import PNG, FigureFormat, save_figure  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -181,12 +181,9 @@ def summary_plot(rows: list[dict[str, Any]], keys: list[str], metric: str, title
 
 
 def summary_figure(rows: list[dict[str, Any]], keys: list[str], metric: str, path: Path, title: str = "",
-                   grid: Sequence[str] | None = None) -> Path:
+                   grid: Sequence[str] | None = None, output: FigureFormat = PNG) -> Path:
     """`metric` of every run against each swept key: finished runs as dots coloured by grid point (log scale when
     positive and spread over more than two decades), along the top grey triangles for finished runs where the metric
     is undefined (None: e.g. no convergence time) and red crosses for runs that did not finish; where a value of a key
-    has at least `MEDIAN_MIN_RUNS` runs, the median over them."""
-    fig = summary_plot(rows, keys, metric, title, grid)
-    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
-    plt.close(fig)
-    return path
+    has at least `MEDIAN_MIN_RUNS` runs, the median over them; written to `path` in `output`'s format."""
+    return save_figure(summary_plot(rows, keys, metric, title, grid), path, output)

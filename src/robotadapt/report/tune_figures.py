@@ -14,8 +14,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..files import atomic_write  # noqa: E402
 from ..studies.tune import Surface, Tuned  # noqa: E402
+from .output import PNG, FigureFormat, save_figure  # noqa: E402
 from .sweep_figures import GAIN_SYMBOLS  # noqa: E402
 
 
@@ -25,9 +25,9 @@ def gain_label(field: str) -> str:
     return f"${GAIN_SYMBOLS[last]}$" if last in GAIN_SYMBOLS else field
 
 
-def tune_figure(tuned: Tuned, path: Path) -> None:
-    """Write `path` (PNG): objective and peak torque per iteration; ‖e(t)‖ and max_i |τ_i(t)| before and after (the
-    nominal plant); the objective surface over two gains with the path, when the tuning computed one."""
+def tune_figure(tuned: Tuned, path: Path, output: FigureFormat = PNG) -> None:
+    """Write `path` (in `output`'s format): objective and peak torque per iteration; ‖e(t)‖ and max_i |τ_i(t)| before
+    and after (the nominal plant); the objective surface over two gains with the path, when the tuning computed one."""
     surface = tuned.surface
     panels = 4 if surface is not None else 3
     fig, axes = plt.subplots(1, panels, figsize=(4.6 * panels, 4.0), layout="constrained")
@@ -58,8 +58,7 @@ def tune_figure(tuned: Tuned, path: Path) -> None:
     fig.suptitle(f"robotadapt tune {tuned.scenario.name}: {tuned.objective.text}"
                  + ("" if tuned.max_torque is None else f", max |τ| ≤ {tuned.max_torque:g}")
                  + ("" if tuned.feasible else " (budget NOT met)"))
-    atomic_write(path, lambda f: fig.savefig(f, format="png", dpi=110), binary=True)
-    plt.close(fig)
+    save_figure(fig, path, output)
 
 
 def _surface(ax: Any, tuned: Tuned, surface: Surface) -> None:

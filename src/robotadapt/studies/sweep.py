@@ -12,7 +12,7 @@ come from states logged at most `LOG_SAMPLES` + 1 times per run (the last one at
 The output folder holds `sweep.json` (what was asked: rerunning with other arguments into the same folder is an error),
 `runs.jsonl` (one JSON object per run: `run`, `seed`, the swept values, the metrics of
 :meth:`~robotadapt.sim.result.SimulationResult.metrics` less the wall time; sorted by run when the sweep completes) and
-`sweep.png` (a metric against every swept key).
+`sweep.png` (a metric against every swept key; .pdf or .svg with `--format`).
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ LOG_SAMPLES = 1000  # states logged per run for the metrics (plus the initial on
 MAX_CHUNK = 1000  # runs per chunk: where a vectorized step stops getting cheaper per run; bounds a chunk's log
 MIN_CHUNK_SECONDS = 0.1  # least work per chunk, so that scheduling costs stay small against it
 STEP_SECONDS = 2.5e-4  # measured cost of one RK4 step of one chunk, the per-chunk floor (two-link arm, this machine)
-TABLE, MANIFEST, FIGURE = "runs.jsonl", "sweep.json", "sweep.png"
+TABLE, MANIFEST, FIGURE = "runs.jsonl", "sweep.json", "sweep"  # the figure: sweep.png, .pdf or .svg (--format)
 
 
 class Point(NamedTuple):
