@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 FENCE = re.compile(r"^```(\w+)\n(.*?)^```$", re.S | re.M)
-FILE = re.compile(r"^# file: (\S+)\n")
+FILE = re.compile(r"^(?:# |<!-- )file: ([^\s>]+)(?: -->)?\n")
 
 
 def blocks(page: Path) -> list[tuple[str, str]]:
@@ -18,9 +18,10 @@ def blocks(page: Path) -> list[tuple[str, str]]:
 
 
 def run_page(page: Path, folder: Path, timeout: float = 600.0) -> str:
-    """Run `page`'s blocks in `folder`: a block starting `# file: NAME` is saved as NAME, the other python blocks run as
-    one script (`python page.py`, as a reader pasting them into one session), then each line of a `sh` block, with
-    the environment's `robotadapt` on the PATH. Returns everything printed; a failing block fails with its output."""
+    """Run `page`'s blocks in `folder`: a block starting `# file: NAME` (or `<!-- file: NAME -->`) is saved as NAME,
+    the other python blocks run as one script (`python page.py`, as a reader pasting them into one session), then each
+    line of a `sh` block, with the environment's `robotadapt` on the PATH. Returns everything printed; a failing block
+    fails with its output."""
     bin_dir = str(Path(sys.executable).parent)
     env = {**os.environ, "PATH": bin_dir + os.pathsep + os.environ.get("PATH", ""), "MPLBACKEND": "Agg"}
     script, commands = [], []

@@ -2,7 +2,7 @@
 
 The front door, `import robotadapt as ra`: the names a user needs, each imported from its module when first used, so
 that importing the package stays light (no JAX, scipy or matplotlib until a name needs them) and changes nothing
-outside it (no import hooks, no JAX settings).
+outside it (no import hooks, no JAX settings). docs/own-arm.md walks through them on an arm of your own.
 
 >>> import robotadapt as ra
 >>> arm = ra.TwoLinkArm()
@@ -25,7 +25,11 @@ EXPORTS = {
     "studies.scenarios": ("load", "available"),
     "sim": ("simulate", "simulate_batch", "RK4", "Sampled", "SolveIVP", "SimulationResult"),
     "plant": ("Plant", "sinusoidal_disturbance"),
+    "plant.actuators": ("Actuator", "DCMotor"),
+    "plant.sensors": ("Sensor",),
+    "plant.unmodeled": ("Payload", "ElasticJoint"),
     "robots": ("OneLinkArm", "TwoLinkArm", "PolarArm", "PinocchioArm", "SymbolicArm"),
+    "robots.catalog": ("planar", "dh_arm", "urdf_arm", "example_arm"),
     "controllers": ("PD", "PDGravity", "ComputedTorque", "AdaptiveComputedTorque", "InertiaRelated", "PassivityBased",
                     "Composite", "SignRobust", "DCAL", "Repetitive", "pd_servo", "pid_servo", "state_space_servo"),
     "controllers.adaptation": ("Gradient", "LandauPI", "SwitchingSigma"),
@@ -33,6 +37,7 @@ EXPORTS = {
     "analysis.metrics": ("metrics",),
     "report.files": ("save_result",),
     "report.figures": ("save_figures",),
+    "report.output": ("FigureFormat",),
 }
 _WHERE = {name: module for module, names in EXPORTS.items() for name in names}
 __all__ = ["__version__", *_WHERE]

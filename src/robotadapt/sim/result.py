@@ -22,7 +22,10 @@ class SimulationResult:
     ``"diverged at t=… s: reason"``. `passivity` is the running integral ∫₀ᵗ −rᵀ Z φ̃ dσ of
     (6.4.4) for controllers with a regressor, when the truth is known: carried in the integrated state (RK4 at every
     step; the sum over the ticks in sampled-data runs), read at the logged instants (docs/monitors.md).
-    `monitors` holds signals that need the controller (robotadapt.sim.outputs.controller_series): V_φ(t), λ_min(P⁻¹(t))."""
+    `monitors` holds signals that need the controller (robotadapt.sim.outputs.controller_series): V_φ(t), λ_min(P⁻¹(t)).
+
+    What to do with one — its metrics (`robotadapt.metrics`), saving (`robotadapt.save_result`), figures
+    (`robotadapt.save_figures`) — on an arm of your own: docs/own-arm.md."""
 
     t: Array
     q: Array
