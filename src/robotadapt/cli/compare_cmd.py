@@ -17,7 +17,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                               "them all)")
     compare.add_argument("--fair", action="store_true",
                          help="tune every law's own gains to the same --objective under the same --max-torque first "
-                              "(robotadapt tune), then compare; laws that cannot be differentiated keep the book's gains")
+                              "(robotadapt tune), then compare; laws that cannot be differentiated keep the lineup's "
+                              "gains (the book's, scaled to the arm)")
     compare.add_argument("--max-torque", type=float, metavar="T", help="with --fair: the torque budget max |τ_i(t)| ≤ T")
     compare.add_argument("--objective", default="rms_error", metavar="NAME",
                          help="with --fair: the objective each law is tuned to (as for robotadapt tune; default rms_error)")

@@ -53,8 +53,11 @@ class Repetitive:
 
     û_d learns the repeatable dynamics u_d(t) = Y_d φ (7.2.29): the torque and the learning law need no regressor and
     no model. û_d(t − T) is read from a delay line of N = T/dt samples (the step must divide the period) and held over
-    each step; û_d = 0 on [−T, 0). The saturation bounds must contain u_d(t) along the trajectory. `period` defaults to
-    the trajectory's own. Guarantee: e → 0, ė bounded (→ 0 with the saturated form).
+    each step; û_d = 0 on [−T, 0). With `rounded_delay` (Python only: `robotadapt compare` keeps a scenario's step) a
+    step that does not divide T is accepted and N = round(T/dt): the law is (7.2.32) with the delay T' = N·dt, within
+    dt/2 of T, so u_d(t) − u_d(t − T') = O(|T − T'|·‖u̇_d‖) enters (7.2.34) each period, e → 0 becomes a residual of
+    that order, and V's window integrals run over T'. The saturation bounds must contain u_d(t) along the trajectory.
+    `period` defaults to the trajectory's own. Guarantee: e → 0, ė bounded (→ 0 with the saturated form).
 
     Lyapunov function (7.2.43), evaluated by :meth:`lyapunov` with the true φ (monitors only):
 
@@ -95,6 +98,7 @@ class Repetitive:
     u_max: Any = None
     gram: Any = field(default=None, metadata={"internal": True})  # G = (1/2k_L) ∫_0^T Y_dᵀY_d, from `prepare`
     table: PeriodicRegressorTable | None = field(default=None, metadata={"internal": True})
+    rounded_delay: bool = field(default=False, metadata={"internal": True})  # N = round(T/dt) (class docstring)
 
     def __post_init__(self) -> None:
         for name in ("Kv", "Kp", "Ka", "kL"):
@@ -132,7 +136,8 @@ class Repetitive:
 
     def prepare(self, trajectory: Any, dt: float, t_final: float) -> Repetitive:
         """Take the period from the trajectory when none is given; check that the trajectory repeats with it (7.2.30)
-        and that the step divides it; tabulate Y_d over one period on the half-step grid and compute G for V."""
+        and that the step divides it (or, with `rounded_delay`, is at most 2T); tabulate Y_d over one period on the
+        half-step grid and compute G for V."""
         declares = hasattr(trajectory, "period")  # a trajectory class without the attribute: trust `period`
         own: float | None = trajectory.period if declares else None
         if declares and own is None:
@@ -145,7 +150,7 @@ class Repetitive:
             raise ConfigError("controller.period", f"T = {period:.10g} s is not a multiple of the trajectory's period "
                               f"{own:.10g} s")
         steps = period / dt
-        if abs(steps - round(steps)) > 1e-6 * steps:
+        if abs(steps - round(steps)) > 1e-6 * steps and not (self.rounded_delay and round(steps) >= 1):
             raise ConfigError("simulation.dt", f"the period T = {period:.10g} s must be a whole number of steps; "
                               f"use dt = T/N, e.g. dt = {period / max(round(steps), 1):.17g}")
         n_half, p = 2 * round(steps), self.model.p
@@ -164,7 +169,8 @@ class Repetitive:
         return replace(self, period=period, gram=gram / (2.0 * self.kL), table=table)
 
     def delay_line(self, dt: float, q0: Array, dq0: Array) -> Array:
-        """û_d on [−T, 0) and the steps' increments of w there: zeros, N = T/dt samples of n + p + 1 values."""
+        """û_d on [−T, 0) and the steps' increments of w there: zeros, N = T/dt (rounded) samples of n + p + 1
+        values."""
         return np.zeros((round(self.period / dt), self.model.n + self.model.p + 1))
 
     def desired_regressor(self, t: Array, ref: Reference) -> Array:

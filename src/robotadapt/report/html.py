@@ -261,7 +261,14 @@ FAMILIES = (("fixed estimates, no adaptation", ("computed_torque", "pd", "pd_gra
             ("passivity class (Table 6.4.1)", ("passivity", "passivity_pi")),
             ("computed torque, desired compensation, learning", ("adaptive_computed_torque", "dcal", "repetitive")))
 #: drawn in grey in the other panels, as a common reference
-REFERENCE = "slotine_li"
+def _reference(rows: list[Row]) -> int | None:
+    """The row of the scenario's own law (the comparison's reference), drawn in grey behind the others."""
+    return next((i for i, r in enumerate(rows) if r.entry.reference), None)
+
+
+def _drawable(y: np.ndarray | None) -> bool:
+    """A signal with a finite positive sample: what a log axis can draw."""
+    return y is not None and bool(np.any(np.isfinite(y) & (y > 0)))
 
 
 def _families(rows: list[Row]) -> list[tuple[str, list[int]]]:
@@ -281,7 +288,7 @@ def _signal(row: Row, signal: str) -> np.ndarray | None:
 def overlay_figure(rows: list[Row], signal: str) -> Figure:
     """Small multiples of ‖e(t)‖, ‖φ̃(t)‖ (log scale, from each run's first nonzero value, over at most 12 decades)
     or ‖τ(t)‖ (over 4): one panel per family of laws (`FAMILIES`), every law in its own colour and dash (the same in
-    every figure), Slotine–Li in grey behind the other panels."""
+    every figure), the reference (the scenario's own law) in grey behind the other panels."""
     panels = _families(rows)
     cols = 2 if len(panels) > 1 else 1
     nrows = -(-len(panels) // cols)
@@ -289,7 +296,8 @@ def overlay_figure(rows: list[Row], signal: str) -> Figure:
                              squeeze=False)
     joints = joint_types(rows[0].entry.scenario.setup.controller.model) if rows else None
     norms = [_signal(r, signal) for r in rows]
-    ref = next((i for i, r in enumerate(rows) if r.entry.name == REFERENCE and norms[i] is not None), None)
+    ref = _reference(rows)
+    ref = ref if ref is not None and _drawable(norms[ref]) else None
     finite = [y[np.isfinite(y) & (y > 0)] for y in norms if y is not None]
     top = max((float(v.max()) for v in finite if v.size), default=0.0)
     low = min((float(v.min()) for v in finite if v.size), default=0.0)
@@ -300,11 +308,12 @@ def overlay_figure(rows: list[Row], signal: str) -> Figure:
                         label=f"{rows[ref].entry.label} (reference)")
         for i in idx:
             y = norms[i]
-            if y is not None:
+            if y is not None and _drawable(y):
                 ax.semilogy(rows[i].result.t, positive(y), label=rows[i].entry.label, linewidth=1.4, **style(i))
         ax.set_title(title, fontsize="medium")
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize="x-small")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="best", fontsize="x-small")
     for ax in axes.flat[len(panels):]:
         ax.set_visible(False)
     if top > 0:  # the axes share y
@@ -322,7 +331,7 @@ def overlay_figure(rows: list[Row], signal: str) -> Figure:
 
 def laws_figure(rows: list[Row], max_torque: float | None = None) -> Figure:
     """Small multiples, one panel per law on shared axes, so that twelve laws stay readable: ‖e(t)‖ (log, left) and
-    max_i |τ_i(t)| (right, the torque budget dotted when there is one), Slotine–Li's ‖e(t)‖ in grey behind the others;
+    max_i |τ_i(t)| (right, the torque budget dotted when there is one), the reference's ‖e(t)‖ in grey behind the others;
     the title gives RMS ‖e‖ and the peak torque."""
     cols = min(4, max(len(rows), 1))
     nrows = -(-len(rows) // cols)
@@ -332,12 +341,14 @@ def laws_figure(rows: list[Row], max_torque: float | None = None) -> Figure:
     finite = np.concatenate([y[np.isfinite(y) & (y > 0)] for y in norms] or [np.ones(1)])
     top = float(finite.max()) if finite.size else 1.0
     peak = max([float(np.nanmax(np.abs(r.result.tau))) for r in rows if np.isfinite(r.result.tau).any()] or [1.0])
-    ref = next((i for i, r in enumerate(rows) if r.entry.name == REFERENCE), None)
+    ref = _reference(rows)
+    ref = ref if ref is not None and _drawable(norms[ref]) else None
     twins = []
     for i, (ax, row) in enumerate(zip(axes.flat, rows, strict=False)):
         if ref is not None and i != ref:
             ax.semilogy(rows[ref].result.t, positive(norms[ref]), color="0.8", linewidth=1.0)
-        ax.semilogy(row.result.t, positive(norms[i]), linewidth=1.3, **style(i))
+        if _drawable(norms[i]):  # a run that stopped at its first step has nothing to draw
+            ax.semilogy(row.result.t, positive(norms[i]), linewidth=1.3, **style(i))
         twin = ax.twinx()
         twin.plot(row.result.t, np.max(np.abs(row.result.tau), axis=-1), color="C3", linewidth=0.8, alpha=0.7)
         if max_torque is not None:
@@ -361,7 +372,7 @@ def laws_figure(rows: list[Row], max_torque: float | None = None) -> Figure:
         ax.set_ylabel("‖e(t)‖")
     for ax in axes[-1, :]:
         ax.set_xlabel("time $t$ (s)")
-    fig.suptitle("Each law on its own: tracking error (Slotine–Li in grey) and peak joint torque"
+    fig.suptitle("Each law on its own: tracking error (the reference in grey) and peak joint torque"
                  + ("" if max_torque is None else f", budget {max_torque:g} dotted"))
     fig.tight_layout()
     return fig
@@ -376,8 +387,9 @@ OVERLAYS = {"errors": ("e", "Tracking error ‖e(t)‖"),
 def _gains_text(budget: dict[str, Any] | None, rows: list[Row]) -> str:
     """What the gains of the report are: the book's, or tuned to one objective under one torque budget (`budget`)."""
     if budget is None:
-        return ("The book's gains for each law on the two-link arm (or the scenario's own, for the law it uses); they "
-                "are not tuned to a common bandwidth, so the table compares the laws as the book ran them.")
+        return ("The scenario's own law is the reference, run as it is given; every other law has the book's gains, "
+                "scaled to the arm where it is not the book's (each row's settings say how), from the same initial "
+                "estimate. They are not tuned to a common bandwidth: <code>--fair</code> tunes them.")
     over = [r.entry.label for r in rows if not r.metrics.get("within_budget")]
     return (f"Fair comparison: every law's own gains tuned by <code>robotadapt tune</code> to minimise "
             f"<code>{html.escape(str(budget['objective']))}</code> under the same torque budget max |τ_i(t)| ≤ "

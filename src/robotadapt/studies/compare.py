@@ -1,10 +1,42 @@
 """The comparison of every law of chapters 6–7 on one scenario's arm, trajectory and disturbance (`robotadapt compare`):
-the lineup with each law's book gains, and one row of metrics per law (tables only; :mod:`robotadapt.report.html`
-draws and writes the report)."""
+the lineup, and one row of metrics per law (tables only; :mod:`robotadapt.report.html` draws and writes the report).
+
+**The reference.** The scenario's own controller runs exactly as the scenario gives it, in place of the lineup entry of
+the same kinds (or as the entry "scenario" when none matches); its row says so (`reference`, and its source).
+
+**The other laws' gains.** `LINEUP` holds the book's gains, chosen for the book's two-link arm (λ_max M(0) = 12.15
+kg m² at Example 6.3.1's start). On the scenario's arm every other law takes
+
+1. from the scenario's law each gain that plays the same part there: Γ of a gradient update φ̂̇ = Γ(·)ᵀr (Tables 6.3.1,
+   6.4.1, 7.2.1); Λ, K_v, Ψ, … of the chapter-6 laws, whose r = ė + Λe (6.3.8), (6.4.2); K_v, K_p, k_a, k_L of the
+   §7.2 laws, whose r = ė + e (7.2.6). PD's K_p is K_v Λ of what it got (Λ of Example 6.3.1 unless the scenario has one);
+2. every other gain the book's times s^k: s the arm's scale, k the power of the inertia the gain's unit carries
+   (`_POWER`): 1 for torque gains (K_v, K_p, k_a, k_L, k_d) and adaptation gains (Γ, P(0), K_I, F_p: φ scales as M, the
+   regressor does not) and for the projection box of Table 6.2.1; 2 for adaptive computed torque's Γ ((6.2.19) carries
+   M̂⁻¹); 0 for rates (Λ, Ψ, a) and computed torque's K_p, K_v (they act through M̂, (6.2.2), (6.2.5)). The scale is
+   s = λ_min(K_v) / k_v,book when the scenario's law has a K_v on r (k_v,book = 10 of Example 6.3.1 for the chapter-6
+   laws, 50 of Examples 7.2.1–7.2.2 for §7.2; λ_min, the rate of (6.3.17), so that no joint gets a larger factor than
+   the scenario gives it), else λ_max M(q0) / 12.15, the arm's inertia at its start over the book arm's. (k_d must
+   also exceed the scenario's disturbance, (6.7.8): not checked.)
+
+So on an arm whose M, V_m, G are s times the book arm's, with the scenario's K_v, Γ and φ̂(0) s times the book's, every
+law but composite adaptation (whose one P weighs a torque error and r alike, (6.6.28)) gives the book's e(t); on the
+book's arm s = 1 and the lineup is the book's. Each row's source names what was taken and what scaled, and by what s.
+
+**One initial estimate.** Every law with an estimate starts from the scenario's law's φ̂(0) (0 when it has none, the
+default of `phi_hat0`; the rows say so), the fixed laws (6.2.2), (6.3.5) keep it. Adaptive computed torque takes it projected
+into its box (its note says how many entries moved) and is skipped when the box leaves the true φ outside; computed
+torque is skipped when φ̂(0) makes M̂(q0) singular. A skipped law's reason is one short line (`brief`).
+
+**The repetitive law** runs on the scenario's step and control period h: when h does not divide T its delay line holds
+N = round(T/h) samples (:class:`~robotadapt.controllers.repetitive.Repetitive` with `rounded_delay`), a delay N·h within
+h/2 of T, which its note states.
+"""
 
 from __future__ import annotations
 
 import copy
+import re
 from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
@@ -12,11 +44,13 @@ import numpy as np
 
 from ..analysis.metrics import metrics
 from ..analysis.monitors import convergence_time
-from ..sim.integrators import RK4
+from ..robots.base import RobotModel
+from ..robots.two_link import TwoLinkArm
+from ..sim.integrators import Sampled, SolveIVP
 from ..sim.result import SimulationResult
-from ..validation import ConfigError
+from ..validation import ConfigError, as_gain
 from .scenarios import Scenario
-from .scenarios.build import canonical_kind, setup
+from .scenarios.build import canonical_kind, keys, setup
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,24 +71,22 @@ class Contender(NamedTuple):
     section: dict[str, Any]  # the scenario's [controller] table
 
 
-NOMINAL = OfTruth(1.1)  # fixed estimates φ̂ = 1.1 φ (Example 6.2.1's (0.85, 2.2) for (0.8, 2.3) are +6 %, −4 %)
 SIGMA_BOUND = OfTruth(1.25, norm=True)  # φ0 = 1.25 ‖φ‖ > ‖φ‖ (6.7.15); sigma-modification.toml's 3 is 1.23 ‖φ‖
 _SL = {"Lam": 2.5, "Kv": 10.0, "Gamma": 20.0}  # Example 6.3.1 [BT]
 _PID = {"kind": "pid", "Lam": 2.5, "Psi": 1.0}  # Problem 6.4-1 [P]
-# The comparison's controllers with the gains the packaged two-link scenarios give them. A scenario whose own controller
-# has the same kinds (controller, servo, law, base) replaces that entry's gains with its own.
+# The comparison's controllers with the book's gains for the book's two-link arm (the module docstring says how they
+# follow another arm); the entry of the same kinds (controller, servo, law, base) as the scenario's own is replaced by it.
 LINEUP: dict[str, Contender] = {
     "slotine_li": Contender("Slotine–Li", "Table 6.3.1", "Example 6.3.1", {"kind": "slotine_li", **_SL}),
-    "computed_torque": Contender("computed torque, fixed φ̂", "(6.2.2)", "Example 6.2.1's K_p, K_v; φ̂ = 1.1 φ",
-                                 {"kind": "computed_torque", "Kp": 4.0, "Kv": 4.0, "phi_hat0": NOMINAL}),
+    "computed_torque": Contender("computed torque, fixed φ̂", "(6.2.2)", "Example 6.2.1's K_p, K_v",
+                                 {"kind": "computed_torque", "Kp": 4.0, "Kv": 4.0}),
     "pd": Contender("PD", "baseline", "K_p = K_v Λ, K_v of Example 6.3.1", {"kind": "pd", "Kp": 25.0, "Kv": 10.0}),
-    "pd_gravity": Contender("PD + gravity, fixed φ̂", "(6.3.5)", "K_p = K_v Λ, K_v of Example 6.3.1; φ̂ = 1.1 φ",
-                            {"kind": "pd_gravity", "Kp": 25.0, "Kv": 10.0, "phi_hat0": NOMINAL}),
+    "pd_gravity": Contender("PD + gravity, fixed φ̂", "(6.3.5)", "K_p = K_v Λ, K_v of Example 6.3.1",
+                            {"kind": "pd_gravity", "Kp": 25.0, "Kv": 10.0}),
     "adaptive_computed_torque": Contender(
         "adaptive computed torque + projection", "Table 6.2.1",
-        "Example 6.2.2; box [0.1, 10] (docs: laws.md#adaptive-computed-torque); φ̂(0) = 1.1 φ",
-        {"kind": "adaptive_computed_torque", "Kp": 125.0, "Kv": 50.0, "Gamma": 500.0, "phi_hat0": NOMINAL,
-         "phi_min": 0.1, "phi_max": 10.0}),
+        "Example 6.2.2; box [0.1, 10] (docs: laws.md#adaptive-computed-torque)",
+        {"kind": "adaptive_computed_torque", "Kp": 125.0, "Kv": 50.0, "Gamma": 500.0, "phi_min": 0.1, "phi_max": 10.0}),
     "passivity": Contender("passivity: PID servo + gradient", "Table 6.4.1, Examples 6.4.1, 6.4.3", "Problem 6.4-1",
                            {"kind": "passivity", "Kv": 10.0, "servo": _PID, "law": {"kind": "gradient", "Gamma": 20.0}}),
     "passivity_pi": Contender("passivity: PID servo + Landau PI", "(6.4.20)–(6.4.21)", "Problem 6.4-2",
@@ -74,6 +106,20 @@ LINEUP: dict[str, Contender] = {
     "repetitive": Contender("repetitive (learning)", "Table 7.2.2", "Example 7.2.2; T = the trajectory's period",
                             {"kind": "repetitive", "Kv": 50.0, "Kp": 50.0, "Ka": 50.0, "kL": 50.0}),
 }
+
+_BOOK_PHI = (0.8, 2.3)  # the book's two-link arm, m1, m2 (kg) [BT]: the arm LINEUP's gains were chosen for
+#: the family of each lineup kind: gains of one family play the same part (module docstring); "6.2", computed torque's,
+#: shares none
+_FAMILY = {"slotine_li": "6", "passivity": "6", "composite": "6", "sign_robust": "6", "pd": "6", "pd_gravity": "6",
+           "dcal": "7.2", "repetitive": "7.2", "computed_torque": "6.2", "adaptive_computed_torque": "6.2"}
+#: the letters a law may take from the scenario's law of its family (Γ from either family of gradient laws)
+_SHARED = ("Lam", "Kv", "Kp", "Ka", "kL", "Gamma", "Psi", "a", "P0", "K_I", "F_p", "kd")
+#: the power of the arm's scale s a gain carries (module docstring); a key not listed carries none (rates, options)
+_POWER = {"Kv": 1, "Kp": 1, "Ka": 1, "kL": 1, "kd": 1, "Gamma": 1, "P0": 1, "K_I": 1, "F_p": 1}
+_CT_POWER = {"Gamma": 2, "phi_min": 1, "phi_max": 1}  # computed torque's: its K_p, K_v act through M̂
+#: k_v,book of each family, and where it is from: the denominator of s
+_BOOK_KV = {"6": ("Example 6.3.1", _SL["Kv"]), "7.2": ("Examples 7.2.1–7.2.2", LINEUP["dcal"].section["Kv"])}
+_ARRAY = re.compile(r"\[(?:[-+0-9.,;:eE\s…]|inf|nan)*\]")  # an array's repr in a message: [1. 2.], [[0.1 …]]
 
 
 def number_text(v: Any) -> str:
@@ -99,16 +145,25 @@ def flat(section: Any, prefix: str = "") -> list[str]:
     return [item for k, v in section.items() for item in flat(v, f"{prefix}.{k}" if prefix else k)]
 
 
+def brief(exc: ConfigError, limit: int = 160) -> str:
+    """A refusal as one line of at most `limit` characters: its field and reason, every array's repr cut to …."""
+    text = " ".join(str(exc).split())
+    while (short := _ARRAY.sub("…", text)) != text:
+        text = short
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
 @dataclass(frozen=True, eq=False)
 class Entry:
-    """One controller of a comparison: its scenario (the common setting with this controller), label, source, and
-    what was changed for it (`note`, e.g. the step of the repetitive law)."""
+    """One controller of a comparison: its scenario (the common setting with this controller), label, source, what was
+    changed for it (`note`, e.g. the repetitive law's delay line) and whether it is the scenario's own (`reference`)."""
 
     name: str
     label: str
     source: str
     scenario: Scenario
     note: str = ""
+    reference: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,75 +182,239 @@ def _kinds(section: Any) -> tuple[Any, ...]:
             + tuple(_kinds(section[k]) for k in ("servo", "law", "base") if k in section))
 
 
-def _fill(section: Any, phi: np.ndarray) -> Any:
-    """A copy of a lineup section with every :class:`OfTruth` value evaluated at the true φ."""
+def _fill(section: Any, phi: np.ndarray | None) -> Any:
+    """A copy of a lineup section with every :class:`OfTruth` value evaluated at the true φ (None: not known in the
+    controller's parameters)."""
     if isinstance(section, dict):
         return {k: _fill(v, phi) for k, v in section.items()}
-    return section.value(phi) if isinstance(section, OfTruth) else copy.deepcopy(section)
+    if not isinstance(section, OfTruth):
+        return copy.deepcopy(section)
+    if phi is None:
+        raise ConfigError("plant.robot", "the true arm lacks some of the controller's parameters: no bound from φ")
+    return section.value(phi)
 
 
-def _entry(base: Scenario, name: str, label: str, source: str, section: dict[str, Any]) -> Entry:
-    """`base` with controller `section`; for the repetitive law a step dividing the period and the fixed-step method."""
+def _family(section: Any) -> str | None:
+    return _FAMILY.get(canonical_kind("controller", section.get("kind"))) if isinstance(section, dict) else None
+
+
+def _gains(section: dict[str, Any], family: str | None) -> list[tuple[tuple[str, ...], Any, int]]:
+    """(path, role, power) of each key of a controller section, its servo's, law's and base's: the role under which
+    it is shared with the laws of its family (None: its own) and the power of the arm's scale it carries."""
+    out: list[tuple[tuple[str, ...], Any, int]] = []
+    for key, value in section.items():
+        if key in ("servo", "law", "base") and isinstance(value, dict):
+            inner = _family(value) if key == "base" else family
+            out += [((key, *path), role, power) for path, role, power in _gains(value, inner)]
+        elif family is not None:
+            role = None if family == "6.2" or key not in _SHARED else ("Γ" if key == "Gamma" else family, key)
+            out.append(((key,), role, (_CT_POWER if family == "6.2" else _POWER).get(key, 0)))
+    return out
+
+
+def _at(section: dict[str, Any], path: tuple[str, ...]) -> Any:
+    for key in path:
+        section = section[key]
+    return section
+
+
+def _put(section: dict[str, Any], path: tuple[str, ...], value: Any) -> None:
+    _at(section, path[:-1])[path[-1]] = copy.deepcopy(value)
+
+
+def _same(a: Any, b: Any) -> bool:
+    try:
+        return bool(np.array_equal(np.asarray(a, dtype=float), np.asarray(b, dtype=float)))
+    except (TypeError, ValueError):  # a table such as Gamma = {scale = 10}
+        return False
+
+
+def _times(value: Any, factor: float) -> Any:
+    arr = np.asarray(value, dtype=float) * factor
+    return arr.tolist() if arr.ndim else float(arr)
+
+
+def _product(Kv: Any, Lam: Any, n: int) -> Any:
+    """K_p = K_v Λ as a scenario writes a gain: a number, a diagonal's list, or a matrix."""
+    K = as_gain(Kv, n, "controller.Kv") @ as_gain(Lam, n, "controller.Lam")
+    d = np.diag(K)
+    if np.count_nonzero(K - np.diag(d)):
+        return K.tolist()
+    return float(d[0]) if np.all(d == d[0]) else d.tolist()
+
+
+@dataclass(frozen=True, eq=False)
+class _Arm:
+    """What the lineup takes from the scenario (module docstring): its law's gains by role, the arm's scale s and why,
+    the common φ̂(0) (and whether the scenario's law has one), the true φ in the controller's parameters (None when
+    the true arm lacks some), the controller's model and q(0)."""
+
+    shared: dict[Any, Any]
+    scale: float
+    why: str
+    phi_hat0: np.ndarray
+    estimated: bool
+    phi: np.ndarray | None
+    model: RobotModel
+    q0: np.ndarray
+
+    @classmethod
+    def of(cls, base: Scenario) -> _Arm:
+        s, own = base.setup, base.data["controller"]
+        model: RobotModel = s.controller.model
+        family = _family(own)
+        shared = {role: _at(own, path) for path, role, _ in _gains(own, family) if role is not None}
+        if family in _BOOK_KV and (family, "Kv") in shared:
+            source, book = _BOOK_KV[family]
+            low = float(np.linalg.eigvalsh(as_gain(shared[family, "Kv"], model.n, "controller.Kv")).min())
+            scale, why = low / book, f"the scenario's λ_min(K_v) = {low:.4g} over {source}'s {book:g}"
+        else:
+            mu = float(np.linalg.eigvalsh(s.plant.model.mass_matrix(s.q0, s.plant.phi)).max())
+            mu_book = float(np.linalg.eigvalsh(TwoLinkArm().mass_matrix(np.zeros(2), np.array(_BOOK_PHI))).max())
+            scale, why = mu / mu_book, f"λ_max M(q0) = {mu:.4g} over the book arm's {mu_book:.4g} kg m²"
+        own_estimate = getattr(s.controller, "phi_hat0", None)
+        truth = dict(zip(s.plant.model.param_names, s.plant.phi, strict=True))
+        phi = np.array([truth[k] for k in model.param_names]) if set(model.param_names) <= truth.keys() else None
+        phi_hat0 = np.zeros(model.p) if own_estimate is None else np.array(own_estimate, dtype=float)
+        return cls(shared, scale, why, phi_hat0, own_estimate is not None, phi, model, s.q0)
+
+
+def _estimate(arm: _Arm, section: dict[str, Any]) -> list[str]:
+    """Give a law with an estimate (`section`) the common φ̂(0); the notes when it cannot take it as it is, or a
+    ConfigError when it cannot take it at all (module docstring)."""
+    phi_hat0, p = arm.phi_hat0, arm.model.p
+    notes = [] if arm.estimated else ["φ̂(0) = 0: the scenario's law has no estimate"]
+    if section["kind"] == "adaptive_computed_torque":
+        lo, hi = (np.broadcast_to(np.asarray(section[k], dtype=float), (p,)) for k in ("phi_min", "phi_max"))
+        if arm.phi is None:
+            raise ConfigError("plant.robot", "the true arm lacks some of the controller's parameters: no box to check")
+        outside = int(np.count_nonzero((arm.phi < lo) | (arm.phi > hi)))
+        if outside:
+            raise ConfigError("controller.phi_min", f"the box phi_min = {lo.min():.4g}, phi_max = {hi.max():.4g} leaves "
+                              f"{outside} of {p} true parameters outside; the projection (Table 6.2.1) needs φ in it")
+        projected = np.clip(phi_hat0, lo, hi)
+        moved = int(np.count_nonzero(projected != phi_hat0))
+        if moved:
+            notes.append(f"φ̂(0): {moved} of {p} entries projected into the box (Table 6.2.1: M̂ stays invertible)")
+        phi_hat0 = projected
+    if section["kind"] == "computed_torque":
+        eig = np.linalg.eigvalsh(arm.model.mass_matrix(arm.q0, phi_hat0))
+        if eig.min() <= 1e-9 * np.abs(eig).max():
+            raise ConfigError("controller.phi_hat0", "the common φ̂(0) makes M̂(q0) singular: (6.2.2) with a fixed φ̂ "
+                              "needs M̂ > 0 to apply its feedback")
+    section["phi_hat0"] = phi_hat0.tolist()
+    return notes
+
+
+def _contender(arm: _Arm, c: Contender) -> tuple[str, dict[str, Any], list[str]]:
+    """A lineup entry's source, section on the scenario's arm and notes (module docstring)."""
+    section = _fill(c.section, arm.phi)
+    derived = section["kind"] in ("pd", "pd_gravity") and ("6", "Kp") not in arm.shared  # K_p = K_v Λ
+    taken: list[str] = []
+    scaled: list[str] = []
+    for path, role, power in _gains(section, _family(section)):
+        book = _at(section, path)
+        if role in arm.shared:
+            value, changed = arm.shared[role], taken
+        elif power and not (derived and path == ("Kp",)):
+            value, changed = _times(book, arm.scale**power), scaled
+        else:
+            continue
+        if not _same(value, book):
+            _put(section, path, value)
+            changed.append(".".join(path))
+    if derived:
+        Kp = _product(section["Kv"], arm.shared.get(("6", "Lam"), _SL["Lam"]), arm.model.n)
+        if not _same(Kp, section["Kp"]):
+            section["Kp"] = Kp
+            (taken if {("6", "Kv"), ("6", "Lam")} & arm.shared.keys() else scaled).append("Kp = K_v Λ")
+    source = f"{c.reference}; gains: {c.gains}"
+    if scaled:
+        source += f", scaled by s = {arm.scale:.4g} ({arm.why}): {', '.join(scaled)}"
+    if taken:
+        source += f"; from the scenario: {', '.join(taken)}"
+    holder = next((s for s in (section, section.get("base")) if isinstance(s, dict) and "phi_hat0" in
+                   keys("controller", s["kind"])), None)
+    return source, section, [] if holder is None else _estimate(arm, holder)
+
+
+def _entry(base: Scenario, name: str, label: str, source: str, section: dict[str, Any], notes: list[str],
+           reference: bool = False) -> Entry:
+    """`base` with controller `section`; the repetitive law on the scenario's step (module docstring)."""
     data = copy.deepcopy(base.data)
     data.pop("study", None)
     data["controller"] = section
-    note = ""
+    rounded = False
     if section.get("kind") == "repetitive":
-        period = getattr(base.setup.trajectory, "period", None)
+        period = section.get("period", getattr(base.setup.trajectory, "period", None))
         if period is None:
             raise ConfigError("trajectory", "the repetitive law needs a periodic desired trajectory (7.2.30)")
         integrator = base.setup.integrator
-        steps = period / integrator.dt
-        if abs(steps - round(steps)) > 1e-6 * steps or not isinstance(integrator, RK4):
-            dt = period / np.ceil(steps - 1e-6)
+        if isinstance(integrator, SolveIVP):
             sim = data["simulation"]
             for key in ("rtol", "atol"):
                 sim.pop(key, None)
-            sim.update(dt=dt, method="rk4")
-            note = f"dt = T/{round(period / dt)} = {dt:.4g} s, RK4 (the step must divide the period)"
-    return Entry(name, label, source, Scenario(f"{base.name} [{name}]", data, setup(data)), note)
+            sim["method"] = "rk4"
+            notes.append(f"RK4 at dt = {integrator.dt:.4g} s (a delay line needs the fixed step)")
+        h, step = (integrator.control_period, "Ts") if isinstance(integrator, Sampled) else (integrator.dt, "dt")
+        steps = period / h
+        rounded = abs(steps - round(steps)) > 1e-6 * steps
+        if rounded:
+            miss = round(steps) * h - period
+            notes.append(f"delay line N = round(T/{step}) = {round(steps)} steps: N·{step} = T {'+−'[miss < 0]} "
+                         f"{abs(miss):.3g} s (Table 7.2.2's delay to within {step}/2)")
+    built = setup(data)
+    if rounded:
+        built = replace(built, controller=replace(built.controller, rounded_delay=True))
+    return Entry(name, label, source, Scenario(f"{base.name} [{name}]", data, built), "; ".join(notes), reference)
 
 
 def lineup(base: Scenario, names: list[str] | None = None) -> tuple[list[Entry], dict[str, str]]:
     """The comparison's entries on `base`'s arm, trajectory, disturbance, initial state and step, and the lineup names
-    that do not apply (with why). `names` defaults to all of `LINEUP`; the lineup entry of the same kinds as the
-    scenario's own controller takes the scenario's gains, and a scenario controller that matches none joins as
-    "scenario"."""
+    that do not apply (with why, one line each). `names` defaults to all of `LINEUP`; the scenario's own controller is
+    the reference, in place of the lineup entry of the same kinds or as "scenario"; the other laws' gains and initial
+    estimate follow the scenario (module docstring)."""
     own = base.data["controller"]
     match = next((n for n, c in LINEUP.items() if _kinds(c.section) == _kinds(own)), None)
     known = list(LINEUP) + ([] if match else ["scenario"])
     for name in names or ():
         if name not in known:
             raise ConfigError("--controllers", f"unknown controller {name!r}; choose from {', '.join(known)}")
-    phi = base.setup.plant.phi
+    arm = _Arm.of(base)
     entries, skipped = [], {}
     for name in dict.fromkeys(known if names is None else names):
-        if name == "scenario":
-            label, source, section = f"the scenario's {own.get('kind')}", "the scenario's controller", own
-        else:
-            c = LINEUP[name]
-            section = own if name == match else _fill(c.section, phi)
-            label, source = c.label, f"{c.reference}; gains: {'the scenario' if name == match else c.gains}"
         try:
-            entries.append(_entry(base, name, label, source, copy.deepcopy(section)))
+            if name in (match, "scenario"):
+                c = LINEUP.get(name)
+                label = c.label if c else f"the scenario's {own.get('kind')}"
+                source = f"{c.reference + '; ' if c else ''}gains: the scenario's (the reference, run as it is given)"
+                entries.append(_entry(base, name, label, source, copy.deepcopy(own), [], reference=True))
+            else:
+                entries.append(_entry(base, name, LINEUP[name].label, *_contender(arm, LINEUP[name])))
         except ConfigError as exc:
             if names is not None:
-                raise ConfigError("--controllers", f"{name} does not apply here: {exc}") from None
-            skipped[name] = str(exc)
+                raise ConfigError("--controllers", f"{name} does not apply here: {brief(exc)}") from None
+            skipped[name] = brief(exc)
     return entries, skipped
 
 
 def _row(entry: Entry, progress: bool) -> Row:
+    """Run `entry`; its metrics, µs/step None for a run that stopped before t_final (not ok, or its log ends more
+    than a logging interval early)."""
     res = entry.scenario.run(progress)
     m = metrics(res)
-    steps = max(round(float(res.t[-1]) / entry.scenario.setup.integrator.dt), 1)
+    s = entry.scenario.setup
+    h = s.integrator.control_period if isinstance(s.integrator, Sampled) else s.integrator.dt
+    finished = res.ok and float(res.t[-1]) > s.t_final - s.log_every * h * (1 + 1e-9)
+    steps = max(round(s.t_final / s.integrator.dt), 1)
     e_norm = np.linalg.norm(res.e, axis=-1)
     summary = {
-        "controller": entry.name, "label": entry.label, "source": entry.source, "status": res.status,
-        "rms_error_norm": m["rms_error_norm"], "final_error": float(e_norm[-1]),
+        "controller": entry.name, "label": entry.label, "source": entry.source, "reference": entry.reference,
+        "status": res.status, "rms_error_norm": m["rms_error_norm"], "final_error": float(e_norm[-1]),
         "max_error": float(e_norm.max()), "peak_torque": float(np.max(m["max_abs_torque"])),
         "control_energy": m["control_energy"], "final_phi_error": m.get("final_phi_error"),
-        "convergence_time": convergence_time(res.t, res.e), "us_per_step": 1e6 * res.wall_time / steps,
+        "convergence_time": convergence_time(res.t, res.e),
+        "us_per_step": 1e6 * res.wall_time / steps if finished else None,
         "settings": ", ".join(flat(entry.scenario.data["controller"])), "note": entry.note,
     }
     return Row(entry, res, summary)
@@ -240,7 +459,7 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
          progress: bool = False) -> tuple[list[Row], dict[str, str]]:
     """The fair comparison: every entry of :func:`lineup` with its own gains tuned (`tunable`) to the same `objective`
     under the same torque budget (:func:`robotadapt.studies.tune.tune`, at most `max_runs` runs each), then run as
-    :func:`compare` runs it. A law that cannot be differentiated keeps the book's gains, and its row says why; each row
+    :func:`compare` runs it. A law that cannot be differentiated keeps the lineup's gains, and its row says why; each row
     holds `tuned_gains`, `within_budget` and `tune_runs`."""
     from .tune import closed_loop, tune
 
@@ -254,7 +473,8 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
                 raise ConfigError("controller", "no gain of this law can be tuned")
             tuned = tune(entry.scenario, fields, objective, max_torque, max_runs=max_runs)
         except ConfigError as exc:
-            row = _row(replace(entry, note=f"book gains: not tuned ({exc.reason})"), progress)
+            note = "; ".join(filter(None, (entry.note, f"lineup gains: not tuned ({brief(exc)})")))
+            row = _row(replace(entry, note=note), progress)
             row.metrics.update(tuned_gains=None, tune_runs=0)
         else:
             gains = tuned.summary()["gains"]
