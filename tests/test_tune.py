@@ -19,6 +19,7 @@ from robotadapt.studies.scenarios import load
 from robotadapt.studies.tune import Problem, optimise, score
 
 SHORT = ["simulation.t_final=1.0", "simulation.backend='jax'"]
+ACT = ["controller.phi_min=0.1", "controller.phi_max=10", "controller.phi_hat0=[0.85, 2.2]"]  # inside M̂ > 0
 # (scenario, gains varied, a form of each that the test also covers): Slotine–Li with a full SPD Kv (Cholesky), a
 # diagonal Λ and a scalar Γ; the composite law's P0 enters its initial state P(0); DCAL's gains are plain numbers
 LAWS = {
@@ -26,6 +27,12 @@ LAWS = {
                    ["controller.Kv", "controller.Lam", "controller.Gamma"]),
     "composite": ("example-6.6.3", [], ["controller.Lam", "controller.Kv", "controller.P0", "controller.a"]),
     "dcal": ("example-7.2.1", [], ["controller.Kv", "controller.Kp", "controller.Ka", "controller.Gamma"]),
+    # adaptive computed torque: K_p, K_v enter the Lyapunov pair P of (6.2.16), recomputed from the traced gains — the
+    # book's closed form for scalar gains, the dense solve of AᵀP + PA = −Q with a diagonal K_p and Q tuned too
+    "adaptive_computed_torque": ("example-6.2.2", ACT, ["controller.Kp", "controller.Kv", "controller.Gamma"]),
+    "adaptive_computed_torque_Q": ("example-6.2.2", ACT + ["controller.Kp=[125.0, 100.0]",
+                                                           "controller.Q=[[2,0,0,0],[0,2,0,0],[0,0,1,0],[0,0,0,1]]"],
+                                   ["controller.Kp", "controller.Kv", "controller.Q"]),
 }
 
 
@@ -99,10 +106,28 @@ def test_gains_stay_positive_definite_and_round_trip(x64):
 
 
 def test_a_gain_the_law_derives_constants_from_is_refused():
-    """Adaptive computed torque solves AᵀP + PA = −Q from K_p, K_v at construction: not a gain to differentiate."""
-    scenario = load("example-6.2.2", SHORT)
+    """Adaptive computed torque takes the book's P for scalar gains and solves AᵀP + PA = −I otherwise: a K_p given as
+    an equal-valued list would switch between the two as it is tuned, so it is refused (a scalar K_p, or a list with
+    controller.Q given, is tuned)."""
+    scenario = load("example-6.2.2", SHORT + ["controller.Kp=[125.0, 125.0]"])
     with pytest.raises(Exception, match="derives other constants"):
         locate(scenario, "controller.Kp")
+
+
+def test_the_lyapunov_pair_solves_its_equation():
+    """P from the dense Kronecker solve against (6.2.16) itself, and the book's closed form against the solve with its
+    Q = diag(k_p I, (2k_v − 1) I)."""
+    from robotadapt.controllers.computed_torque import lyapunov
+
+    kp, kv, eye = np.diag([125.0, 100.0]), np.diag([50.0, 40.0]), np.eye(2)
+    A = np.block([[0 * eye, eye], [-kp, -kv]])
+    Q = np.diag([2.0, 2.0, 1.0, 1.0])
+    P = lyapunov(np, A, Q)
+    np.testing.assert_allclose(A.T @ P + P @ A, -Q, atol=1e-9)
+    book = load("example-6.2.2").setup.controller
+    P_book, Q_book = book.lyapunov_pair
+    A = np.block([[0 * eye, eye], [-book.Kp, -book.Kv]])
+    np.testing.assert_allclose(lyapunov(np, A, Q_book), P_book, rtol=1e-10, atol=1e-9)
 
 
 def test_tune_writes_files_and_run_reproduces_the_objective(tmp_path, capsys):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -68,6 +68,7 @@ class AdaptiveComputedTorque(EstimateState):
     P: Any = None
     phi_min: Any = None
     phi_max: Any = None
+    book_pair: ClassVar[bool]  # per instance, not a field: set by __post_init__ (a copy keeps it)
 
     def __post_init__(self) -> None:
         n, p = self.model.n, self.model.p
@@ -79,34 +80,42 @@ class AdaptiveComputedTorque(EstimateState):
         given = {k: getattr(self, k) for k in ("P", "Q", "phi_min", "phi_max") if getattr(self, k) is not None}
         freeze(self, **{k: as_gain(v, 2 * n, f"controller.{k}") if k in ("P", "Q") else as_vector(v, p, f"controller.{k}")
                         for k, v in given.items()})
+        # which pair (6.2.16) takes: the book's closed form for scalar gains with neither P nor Q given; decided here,
+        # on the gains as given, and kept when tuning puts in traced gains of the same form
+        object.__setattr__(self, "book_pair", self.P is None and self.Q is None and _is_scalar(self.Kp)
+                           and _is_scalar(self.Kv))
         # The fields keep what was given, so `dataclasses.replace` works; the derived constants are cached properties,
         # evaluated now so that bad input fails at construction.
         _ = self.lyapunov_pair, self.bounds
 
     @cached_property
     def lyapunov_pair(self) -> tuple[Array, Array]:
-        """(P, Q) with AᵀP + PA = −Q, both symmetric positive definite (6.2.16)."""
-        n = self.model.n
-        A = np.block([[np.zeros((n, n)), np.eye(n)], [-self.Kp, -self.Kv]])  # (6.2.10)
+        """(P, Q) with AᵀP + PA = −Q, both symmetric positive definite (6.2.16): written with the namespace of the gains,
+        so that a traced K_p, K_v or Q (tuning, :mod:`robotadapt.studies.gain_space`) gives a traced P; the checks run
+        on concrete gains (at construction)."""
+        n, xp = self.model.n, array_namespace(self.Kp, self.Kv, *[m for m in (self.P, self.Q) if m is not None])
+        eye, concrete = xp.eye(n), xp is np
+        A = xp.concatenate([xp.concatenate([0 * eye, eye], axis=1), xp.concatenate([-self.Kp, -self.Kv], axis=1)])
         if self.P is not None:
-            Q = -(A.T @ self.P + self.P @ A)
-            _check_pd(Q, "controller.P", "Q = −(AᵀP + PA) must be positive definite for these Kp, Kv; give "
-                      "controller.Q instead to solve for P")
+            Q = -(A.T @ self.P + self.P @ A)  # (6.2.10)
+            if concrete:
+                _check_pd(Q, "controller.P", "Q = −(AᵀP + PA) must be positive definite for these Kp, Kv; give "
+                          "controller.Q instead to solve for P")
             return self.P, Q
-        if self.Q is None and _is_scalar(self.Kp) and _is_scalar(self.Kv):
-            kp, kv, eye = self.Kp[0, 0], self.Kv[0, 0], np.eye(n)
-            if not kv > 0.5:
+        if self.book_pair:
+            kp, kv = self.Kp[0, 0], self.Kv[0, 0]
+            if concrete and not kv > 0.5:
                 raise ConfigError("controller.Kv", f"the book's default P needs k_v > 1/2 (Q = diag(k_p I, (2k_v − 1) "
                                   f"I)), got {kv:g}; give controller.Q or controller.P")
-            P = np.block([[(kp + kv / 2) * eye, 0.5 * eye], [0.5 * eye, eye]])
-            return P, np.block([[kp * eye, 0 * eye], [0 * eye, (2 * kv - 1) * eye]])
-        from scipy.linalg import solve_continuous_lyapunov  # here: importing the controllers stays light
-
-        Q = np.eye(2 * n) if self.Q is None else self.Q
-        P = solve_continuous_lyapunov(A.T, -Q)
-        P = 0.5 * (P + P.T)
-        _check_pd(P, "controller.Q", "the solution P of AᵀP + PA = −Q is not positive definite to working precision "
-                  "(badly scaled Kp, Kv?)")
+            P = xp.concatenate([xp.concatenate([(kp + kv / 2) * eye, 0.5 * eye], axis=1),
+                                xp.concatenate([0.5 * eye, eye], axis=1)])
+            return P, xp.concatenate([xp.concatenate([kp * eye, 0 * eye], axis=1),
+                                      xp.concatenate([0 * eye, (2 * kv - 1) * eye], axis=1)])
+        Q = xp.eye(2 * n) if self.Q is None else self.Q
+        P = lyapunov(xp, A, Q)
+        if concrete:
+            _check_pd(P, "controller.Q", "the solution P of AᵀP + PA = −Q is not positive definite to working "
+                      "precision (badly scaled Kp, Kv?)")
         return P, Q
 
     @cached_property
@@ -120,6 +129,9 @@ class AdaptiveComputedTorque(EstimateState):
         if not np.all((lo <= self.phi_hat0) & (self.phi_hat0 <= hi)):
             raise ConfigError("controller.phi_hat0", f"must lie in the box [phi_min, phi_max] = [{lo}, {hi}]")
         return lo, hi
+
+    #: the cached constants computed from K_p, K_v, Q by traceable arithmetic (a tuned gain recomputes them)
+    derived: ClassVar[tuple[str, ...]] = ("lyapunov_pair", "_BtP")
 
     @cached_property
     def _BtP(self) -> Array:
@@ -177,6 +189,16 @@ def _check_pd(S: Array, field: str, what: str) -> None:
     low = np.linalg.eigvalsh(S).min() if np.all(np.isfinite(S)) else np.nan
     if not low > 0:
         raise ConfigError(field, f"{what} (smallest eigenvalue {low:.3g})")
+
+
+def lyapunov(xp: Any, A: Array, Q: Array) -> Array:
+    """P with AᵀP + PA = −Q (6.2.16), by the Kronecker form (Aᵀ ⊗ I + I ⊗ Aᵀ) vec P = −vec Q: one dense solve of
+    (2n)² unknowns, traceable and differentiable (a 7-joint arm: 196), symmetrised."""
+    m = A.shape[0]
+    eye = xp.eye(m)
+    K = xp.kron(A.T, eye) + xp.kron(eye, A.T)
+    P = xp.reshape(xp.linalg.solve(K, -xp.reshape(Q, (m * m,))), (m, m))
+    return 0.5 * (P + P.T)
 
 
 def _is_scalar(K: Array) -> bool:

@@ -53,7 +53,8 @@ def run_on(asked: str, backend: str, run: Callable[[str], T]) -> tuple[T, str]:
     except ConfigError as exc:
         if asked != "auto" or backend == "numpy" or exc.field != "simulation.backend":
             raise
-        warnings.warn(f"{exc.reason}; stepped with numpy instead (simulation.backend = 'auto'): slower, same numbers — "
+        why = exc.reason.removesuffix("; use backend = 'numpy'")
+        warnings.warn(f"{why}; stepped with numpy instead (simulation.backend = 'auto'): slower, same numbers — "
                       "docs/tutorial.md#traceable", NotTraceableWarning, stacklevel=3)
         return run("numpy"), "numpy"
 

@@ -432,7 +432,7 @@ def compare(base: Scenario, names: list[str] | None = None, progress: bool = Fal
 
 
 #: the gains a fair comparison tunes, where a law has them (the book's letters; `robotadapt.studies.tune.locate`
-#: refuses those a law derives other constants from, e.g. adaptive computed torque's K_p, K_v)
+#: refuses those a law derives other constants from that it cannot recompute from a traced gain)
 TUNED_GAINS = ("Lam", "Kv", "Kp", "Ka", "Gamma", "P0", "K_I", "F_p", "Psi", "kL")
 
 

@@ -147,14 +147,16 @@ def _form(value: Any, field_name: str) -> str:
 def _comparable(controller: Any, path: tuple[str, ...]) -> tuple[Any, list[Array]]:
     """A fresh controller (with the constants it derived at construction) less its model and the gain at `path`, as
     skeleton + leaves: two builds that differ only in that gain compare equal unless the law derives other constants
-    from it."""
+    from it — other than those it lists in `derived`, which it computes from a traced gain itself (adaptive computed
+    torque's Lyapunov pair)."""
 
     def blank(obj: Any, at: tuple[str, ...]) -> Any:
         if is_dataclass(obj) and not isinstance(obj, type):
             new = copy.copy(obj)
+            derived = getattr(type(obj), "derived", ())  # recomputed from a traced gain by the law itself
             for key, value in vars(obj).items():
                 inner = value if key == "model" else blank(value, at[1:] if at[:1] == (key,) else ())
-                object.__setattr__(new, key, None if at == (key,) or key == "model" else inner)
+                object.__setattr__(new, key, None if at == (key,) or key in ("model", *derived) else inner)
             return new
         return obj
 
@@ -197,7 +199,8 @@ def locate(scenario: Scenario, spec: str) -> Gain:
 def _checked(scenario: Scenario, gain: Gain, value: Any) -> Gain:
     """Refuse a gain whose change alters other constants of the law; add the affine map of the initial state in it."""
     trial = copy.deepcopy(scenario.data)
-    nudged = gain.value(gain.theta0() + 0.1)
+    theta = gain.theta0()
+    nudged = gain.value(theta + 0.1 * (1.0 + np.arange(theta.size)) / theta.size)  # unequal: a scalar-valued list varies
     override(trial, assignment(gain.field, nudged))
     other = setup(trial).controller
     a, b = _comparable(other, gain.path[1:]), _comparable(setup(copy.deepcopy(scenario.data)).controller, gain.path[1:])
