@@ -278,3 +278,19 @@ def test_a_gain_at_its_bound_is_written_as_the_bound():
     """exp(log 50) is 49.99999999999999 in floating point: the tuned scenario says 50."""
     gain = locate(load("example-6.3.1"), "controller.Kv=2:50")
     assert gain.value(np.log([50.0])) == 50.0 and repr(gain.value(np.log([50.0]))) == "50.0"
+
+
+def test_gains_the_law_refuses_are_failed_runs_not_written():
+    """The traced program skips the law's construction checks: adaptive computed torque's book P needs k_v > ½
+    (6.2.16), so θ with k_v = 0.4 is scored as a failed run, and costs no run."""
+    from robotadapt.studies.tune import DIVERGED, Search
+
+    scenario, gains = law("adaptive_computed_torque")
+    problem = Problem(scenario, gains, parse_objective("rms_error"), None)
+    theta = problem.theta0.copy()
+    assert problem.admissible(theta)
+    theta[1] = np.log(0.4)  # controller.Kv
+    assert not problem.admissible(theta)
+    search = Search(problem, 10, None)
+    value, grad = search.fun(theta, 0.0, 1.0)
+    assert value == DIVERGED and not np.any(grad) and search.runs == 0 and not search.evaluated

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -100,6 +100,18 @@ class Problem:
         self._program = jax.jit(jax.value_and_grad(self._augmented, has_aux=True))
         self._forward: Any = None
 
+    def admissible(self, theta: Array) -> bool:
+        """Whether the law accepts the gains of θ as it accepts a scenario's: its construction-time checks (e.g.
+        adaptive computed torque's k_v > ½ for the book's P, (6.2.16)), which the traced program does not run. A point
+        outside is scored as a run that failed, so the line search steps back and no such gains are written."""
+        ctrl = self.loop.controller
+        try:
+            for gain, part in zip(self.gains, split(self.gains, theta), strict=True):
+                ctrl = _rebuilt(ctrl, gain.path[1:], gain.gain(np.asarray(part, dtype=float)))
+        except ConfigError:
+            return False
+        return True
+
     def terms(self, theta: Array, phi: Array) -> tuple[dict[str, Array], Array, Array]:
         """The objective terms of one run with the gains of θ and the true φ (traced), |τ_i(t_k)|/T at every sample and
         whether the run stayed finite and within `max_state`."""
@@ -166,6 +178,13 @@ class Problem:
         return {name: float(v) for name, v in zip(names, grad, strict=True)}
 
 
+def _rebuilt(obj: Any, path: tuple[str, ...], value: Any) -> Any:
+    """`obj` with the field at `path` set to `value` by `dataclasses.replace` along the path: constructed again, so
+    with the law's checks (a ConfigError), unlike :func:`~robotadapt.sim.gradient.replace_at`."""
+    inner = value if len(path) == 1 else _rebuilt(getattr(obj, path[0]), path[1:], value)
+    return replace(obj, **{path[0]: inner})
+
+
 class _OutOfRuns(Exception):
     pass
 
@@ -186,6 +205,8 @@ class Search:
         """The scaled augmented objective and its gradient at θ (one run per true-parameter set)."""
         if self.runs + len(self.problem.phis) > self.max_runs:
             raise _OutOfRuns
+        if not self.problem.admissible(theta):
+            return DIVERGED, np.zeros_like(theta)
         value, grad, objective, peak, g, ok = self.problem.evaluate(theta, mu, rho)
         self.runs += len(self.problem.phis)
         self.bar.update(len(self.problem.phis))
