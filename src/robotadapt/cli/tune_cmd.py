@@ -31,6 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the --over draws (default 0)")
     p.add_argument("--max-runs", type=int, default=100,
                    help="most differentiated runs (each a forward and a backward pass; default 100)")
+    p.add_argument("--screen", type=int, metavar="N",
+                   help="forward runs of the batched screen that picks the start (default 64; 0 or 1: start at the "
+                        "scenario's gains)")
     p.add_argument("--surface", type=int, metavar="K",
                    help="draw the objective over a K×K grid of the first two scalar gains (K² forward runs); default 9 "
                         "when exactly two scalar gains are tuned, else none; 0: none")
@@ -48,7 +51,8 @@ def main(args: argparse.Namespace) -> int:
     scenario = load(args.scenario, overrides(args))
     out = writable_dir(args.out if args.out is not None else Path("results") / f"tune-{scenario.name}")
     tuned = tune(scenario, args.vary, args.objective, args.max_torque, over=args.over, samples=args.samples,
-                 seed=args.seed, max_runs=args.max_runs, surface_points=args.surface, progress=True)
+                 seed=args.seed, max_runs=args.max_runs, surface_points=args.surface, progress=True,
+                 **({} if args.screen is None else {"screen": args.screen}))
     summary = tuned.summary()
     header = (f"# robotadapt tune {scenario.name}: {summary['objective_expression']} = {summary['objective']:.6g}, "
               f"max |tau| = {summary['max_abs_torque']:.6g}" + ("" if args.max_torque is None else
@@ -62,8 +66,8 @@ def main(args: argparse.Namespace) -> int:
     gains = ", ".join(f"{k} = {v}" for k, v in summary["gains"].items())
     print(f"tune {scenario.name}: {summary['objective_expression']} {tuned.before.objective:.4g} -> "
           f"{tuned.after.objective:.4g}, max |τ| {tuned.before.max_abs_torque:.4g} -> {tuned.after.max_abs_torque:.4g}"
-          f" in {summary['differentiated_runs']} differentiated runs (+ {summary['forward_runs']} forward runs scoring "
-          f"the start and the answer), {tuned.wall_time:.3g} s; {gains}")
+          f" in {summary['differentiated_runs']} differentiated runs (+ {summary['forward_runs']} forward runs: the "
+          f"screen, the start and the answer), {tuned.wall_time:.3g} s; {gains}")
     print(f"wrote {out}/")
     if not tuned.feasible:
         hint = ""

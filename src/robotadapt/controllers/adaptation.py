@@ -11,7 +11,7 @@ state `xa` (shape `(..., state_size)`):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import cached_property
 from typing import Any, Protocol
 
@@ -162,6 +162,11 @@ class SwitchingSigma(Gradient):
         norm = xp.sqrt((xa * xa).sum(axis=-1))
         return self.sigma0 * xp.clip(norm / self.phi0 - 1.0, 0.0, 1.0)
 
+    def surrogate(self, width: float) -> SmoothedSigma:
+        """The smooth law tuning differentiates in place of this one (docs/tuning.md#switching-laws): the ramp's kinks
+        and ‖φ̂‖ at 0 rounded over `width`, continued toward the exact law as width → 0."""
+        return SmoothedSigma(**{f.name: getattr(self, f.name) for f in fields(self)}, width=width)
+
     def passivity_caveat(self) -> str | None:
         """With S = I, dV_φ/dt = −rᵀZφ̃ + σ_s φ̃ᵀΓ⁻¹φ̂, and φ̃ᵀΓ⁻¹φ̂ ≤ 0 whenever ‖φ̂‖ > ‖φ‖ only for Γ = γI
         (Cauchy–Schwarz); for another Γ the leak can add to V_φ (Γ = diag(100, 1), φ̂ = (3, 1): +0.327)."""
@@ -174,3 +179,18 @@ class SwitchingSigma(Gradient):
     def derivative(self, xa: Array, y: Array) -> Array:
         leak = xa @ self.Gamma.T if self.scaled else xa
         return y @ self.Gamma.T - self.sigma(xa)[..., None] * leak
+
+
+@dataclass(frozen=True, eq=False)
+class SmoothedSigma(SwitchingSigma):
+    """:class:`SwitchingSigma` with σ_s of (6.7.14) made smooth for tuning's gradients: ‖φ̂‖ ≈ √(‖φ̂‖² + w²φ0²) (smooth
+    at φ̂ = 0, where the fair comparison starts) and clip(u, 0, 1) ≈ w·[softplus(u/w) − softplus((u − 1)/w)], both exact
+    as the width w → 0 (w traced, > 0)."""
+
+    width: Any = 1.0
+
+    def sigma(self, xa: Array) -> Array:
+        xp = array_namespace(xa)
+        w = self.width
+        u = xp.sqrt((xa * xa).sum(axis=-1) + (w * self.phi0) ** 2) / self.phi0 - 1.0
+        return self.sigma0 * w * (xp.logaddexp(0.0, u / w) - xp.logaddexp(0.0, (u - 1.0) / w))

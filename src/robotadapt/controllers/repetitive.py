@@ -66,19 +66,20 @@ class Repetitive:
     Its integral runs over the last period, which the logged samples would give only to the accuracy of the logging
     rate. With u_d = Y_d φ (7.2.29) and Y_d T-periodic (7.2.30) it splits into parts the law can carry without φ:
 
-        (1/2k_L) ∫_{t−T}^{t} ‖ũ_d‖² dσ = φᵀ G φ − φᵀ w_Ydu(t) + w_uu(t),     G = (1/2k_L) ∫_0^T Y_dᵀ Y_d dσ,
+        (1/2k_L) ∫_{t−T}^{t} ‖ũ_d‖² dσ = φᵀ G φ / 2k_L − φᵀ w_Ydu(t) + w_uu(t),     G = ∫_0^T Y_dᵀ Y_d dσ,
         w_Ydu(t) = (1/k_L) ∫_{t−T}^{t} Y_dᵀ û_d dσ,     w_uu(t) = (1/2k_L) ∫_{t−T}^{t} ‖û_d‖² dσ.
 
     :meth:`prepare` computes G (Simpson's rule on the half-step grid: exact to round-off for a smooth periodic
-    integrand). The state carries w = [w_Ydu, w_uu] and the current step's part of it, c (p + 1 values each):
+    integrand); G holds no gain, so k_L may change after it (a traced k_L in tuning): every 1/k_L is taken where it
+    is used. The state carries w = [w_Ydu, w_uu] and the current step's part of it, c (p + 1 values each):
     dc/dt = [Y_dᵀ û_d / k_L, ‖û_d‖² / 2k_L] with the û_d the torque uses (held + k_L r(σ) at every RK4 stage), and at
     the sample of step k the law moves the window, w ← w + c − c_{k−N}, c ← 0, where c_{k−N}, the part of the step one
     period earlier, is read from the delay line, which stores c next to û_d(t_k) (0 on [−T, 0), where û_d = 0). So at
     every sample instant t_k, where the log is, w is the integral over [t_k − T, t_k] to RK4's error on it, whatever
-    the logging rate; V(0) = φᵀGφ, the integral of ‖u_d‖² over [−T, 0). In the sampled-data loop the discrete rule
-    sums c over the ticks (û_d and Y_d at the tick: the rectangle rule), and V is (7.2.43) to O(Ts) in the first
-    period, to round-off after it. Y_d comes from a table over one period (:class:`PeriodicRegressorTable`, numpy) or
-    is evaluated on line (compiled runs, off-grid instants); the torque does not use it. State
+    the logging rate; V(0) = φᵀGφ / 2k_L, from the integral of ‖u_d‖² over [−T, 0). In the sampled-data loop the
+    discrete rule sums c over the ticks (û_d and Y_d at the tick: the rectangle rule), and V is (7.2.43) to O(Ts) in
+    the first period, to round-off after it. Y_d comes from a table over one period (:class:`PeriodicRegressorTable`,
+    numpy) or is evaluated on line (compiled runs, off-grid instants); the torque does not use it. State
     x = [û_d(t_k − T) held (n), w (p + 1), c (p + 1)].
 
     The book's claim (7.2.44)–(7.2.49): dV/dt = −(k_v + k_L/2)‖r‖² − k_p‖e‖² − k_a‖e‖²‖r‖² + rᵀũ ≤ −λ₃‖[e, r]‖² when
@@ -96,7 +97,7 @@ class Repetitive:
     period: Any = None
     u_min: Any = None
     u_max: Any = None
-    gram: Any = field(default=None, metadata={"internal": True})  # G = (1/2k_L) ∫_0^T Y_dᵀY_d, from `prepare`
+    gram: Any = field(default=None, metadata={"internal": True})  # G = ∫_0^T Y_dᵀY_d (no gain in it), from `prepare`
     table: PeriodicRegressorTable | None = field(default=None, metadata={"internal": True})
     rounded_delay: bool = field(default=False, metadata={"internal": True})  # N = round(T/dt) (class docstring)
 
@@ -166,7 +167,7 @@ class Repetitive:
             if keep:
                 chunks.append(Yd)
         table = PeriodicRegressorTable(h, np.concatenate(chunks)) if keep else None
-        return replace(self, period=period, gram=gram / (2.0 * self.kL), table=table)
+        return replace(self, period=period, gram=gram, table=table)
 
     def delay_line(self, dt: float, q0: Array, dq0: Array) -> Array:
         """û_d on [−T, 0) and the steps' increments of w there: zeros, N = T/dt (rounded) samples of n + p + 1
@@ -229,8 +230,8 @@ class Repetitive:
         return xp.concatenate([0.0 * u_hat, 0.0 * dc, dc], axis=-1)
 
     def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
-        """V of (7.2.43) with the true φ: ½ rᵀ M r + ½ k_p eᵀe + φᵀGφ − φᵀ w_Ydu + w_uu (class docstring), at the
-        sample instants (where the log is)."""
+        """V of (7.2.43) with the true φ: ½ rᵀ M r + ½ k_p eᵀe + φᵀGφ / 2k_L − φᵀ w_Ydu + w_uu (class docstring), at
+        the sample instants (where the log is)."""
         if self.gram is None:
             raise ConfigError("controller", "V of the repetitive law needs G from prepare(trajectory, dt, t_final)")
         e, de = errors(q, dq, ref)
@@ -238,5 +239,5 @@ class Repetitive:
         _, w, _ = self._parts(x)
         p = self.model.p
         M = self.model.mass_matrix(q, phi)
-        learning = quad(phi, self.gram) - (phi * w[..., :p]).sum(axis=-1) + w[..., p]
+        learning = quad(phi, self.gram) / (2.0 * self.kL) - (phi * w[..., :p]).sum(axis=-1) + w[..., p]
         return 0.5 * (r * matvec(M, r)).sum(axis=-1) + 0.5 * self.Kp * (e * e).sum(axis=-1) + learning

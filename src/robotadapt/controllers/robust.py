@@ -8,8 +8,9 @@ switching term larger than the disturbance restores V̇ ≤ −rᵀK_v r (6.7.12
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, replace
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -45,9 +46,6 @@ class SignRobust:
     (6.4.4)), the φ̂ the torque uses (Landau's PI law, (6.4.20)), a projection, tables prepared ahead of the run — exists
     on the wrapper exactly when the base has it.
     """
-
-    not_differentiable: ClassVar[str] = ("switches (k_d sgn r): its gradient is zero almost everywhere; tune its base law, "
-                                         "then add k_d")
 
     model: RobotModel
     base: Any
@@ -103,9 +101,28 @@ class SignRobust:
             return xp.sign(r)
         return xp.clip(r / self.boundary_layer, -1.0, 1.0)
 
+    def surrogate(self, width: float) -> SmoothedSign:
+        """The smooth law tuning differentiates in place of this one (docs/tuning.md#switching-laws): sgn(r_i) (or
+        sat(r_i/ε)) replaced by tanh(r_i/width), continued toward the exact law as width → 0."""
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return SmoothedSign(**fields, width=width)
+
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         tau_a, dx = self.base(t, x, q, dq, ref)
         tau = tau_a + self.kd * self.switching(self.filtered_error(t, x, q, dq, ref))
         if isinstance(self.base, FiltersTorque):  # a composite base filters the torque applied, sign term included
             dx = self.base.applied(dx, tau_a, tau)
         return tau, dx
+
+
+@dataclass(frozen=True, eq=False)
+class SmoothedSign(SignRobust):
+    """:class:`SignRobust` with the switching term k_d sgn(r) of (6.7.6) replaced by k_d tanh(r/width): the smooth
+    surrogate whose gradient tuning follows, its width (traced, > 0) driven toward zero; the exact law is what the
+    tuned gains are scored and checked on (docs/tuning.md#switching-laws)."""
+
+    width: Any = 1.0
+
+    def switching(self, r: Array) -> Array:
+        """tanh(r/width), componentwise (→ sgn(r) as width → 0)."""
+        return array_namespace(r).tanh(r / self.width)

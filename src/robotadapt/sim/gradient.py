@@ -8,7 +8,9 @@ each block's steps as it goes: memory O(√N) instead of O(N) residuals, for abo
 
 The transition is the one the driver runs, on the same `ClosedLoop`: the logged signals equal the compiled forward
 run's to round-off (tests/test_tune.py asks 1e-9). The loop may hold traced values anywhere (a gain put in by
-:func:`replace_at`, the true φ of a sample): they are constants of the step, not of the program.
+:func:`replace_at`, the true φ of a sample): they are constants of the step, not of the program. A law with a delay
+line (the repetitive law, (7.2.32)) carries it in the scan's carry as the forward engines do, written by
+`.at[slot].set`, so the gradient reaches back through every period's û_d(t − T) (tests/test_tune_repetitive.py).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ..controllers.base import HasDelayLine
 from ..trajectories import Reference, Trajectory
 from ..validation import ConfigError
 from .compiled import float64, jax_module
@@ -46,7 +49,8 @@ class Rollout:
     """A differentiable run: the steps 0 … n of a transition of the one driver (:class:`~robotadapt.sim.loop.RK4Step`,
     or the sampled-data :class:`~robotadapt.sim.sampled.Tick`), logged every `log_every` steps as the driver logs
     them, under a fixed-length `lax.scan` over √N checkpointed blocks of √N steps; the inputs (the reference, the
-    sensor's noise drawn from its seed) laid out ahead as `(blocks, steps per block, ...)` by the transition's feed."""
+    sensor's noise drawn from its seed) laid out ahead as `(blocks, steps per block, ...)` by the transition's feed;
+    the delay line of a law with one in the carry (:meth:`line`)."""
 
     transition: Any  # RK4Step or Tick on the untraced loop: what `signals` rebuilds on the traced one
     h: float  # the step: dt, or the control period
@@ -68,7 +72,7 @@ class Rollout:
         if isinstance(integrator, Sampled):
             h, n = integrator.control_period, loop.n
             step: Any = Tick(loop, integrator, loop.plant.sensor or Sensor(n), loop.plant.actuator or Actuator(n),
-                             float("inf"), False)
+                             float("inf"), isinstance(loop.controller, HasDelayLine))
             per_run, mapped = feed([step], [trajectory], True)
 
             def inputs(first: int, count: int) -> Any:
@@ -88,9 +92,18 @@ class Rollout:
         """The logged instants, `(T,)`."""
         return self.h * np.arange(0, self.n + 1, self.log_every)
 
+    def line(self, loop: ClosedLoop, z0: Array) -> Array | None:
+        """The delay line's initial contents for a law with one (HasDelayLine), as the forward engines build it:
+        `delay_line(h, q0, q̇0)` at the (q0, q̇0) of `z0` (û_d = 0 on [−T, 0) for the repetitive law); None
+        without."""
+        if not isinstance(loop.controller, HasDelayLine):
+            return None
+        q0, dq0, _ = loop.split(z0)
+        return loop.controller.delay_line(self.h, q0, dq0)
+
     def records(self, loop: ClosedLoop, z0: Array) -> Any:
         """The logged records `(T, ...)` of the run of `loop` from `z0` (traced or not), differentiable in everything
-        the loop and `z0` hold."""
+        the loop and `z0` hold (through the delay line too)."""
         jax = jax_module()
         jnp, lax = jax.numpy, jax.lax
         step = replace(self.transition, loop=loop)
@@ -104,7 +117,8 @@ class Rollout:
         def block(carry: Any, inputs: Any) -> tuple[Any, Any]:
             return lax.scan(one, carry, inputs)
 
-        _, out = lax.scan(block, step.start(jnp.asarray(z0)), self.inputs)
+        z0 = jnp.asarray(z0)
+        _, out = lax.scan(block, step.start(z0, self.line(loop, z0)), self.inputs)
         return map_tree(lambda a: a.reshape((-1,) + a.shape[2:])[: n + 1 : self.log_every], out)
 
     @float64
@@ -119,17 +133,9 @@ class Rollout:
 
 def check_differentiable(loop: ClosedLoop) -> None:
     """A ConfigError (field `controller`) for a loop whose run jax.grad cannot go through: a model that JAX cannot
-    trace (Pinocchio), a law with a delay line (its ring is written in place) or a switching term (sgn(r): its gradient
-    is zero almost everywhere and infinite at the switch)."""
-    from ..controllers.base import HasDelayLine
-
+    trace (Pinocchio). A delay line (the repetitive law, (7.2.32)) is differentiated: the rollout carries it
+    (:meth:`Rollout.line`); a switching law (k_d sgn r) through its smooth surrogate (robotadapt.studies.tune)."""
     name = type(loop.controller).__name__
     if not (loop.plant.model.traceable and loop.controller.model.traceable):
         raise ConfigError("controller", f"{name} on {type(loop.plant.model).__name__}: the model cannot be traced by "
                           "JAX, so the run cannot be differentiated; tune on a DH/URDF kinematic tree model")
-    if isinstance(loop.controller, HasDelayLine):
-        raise ConfigError("controller", f"{name} has a delay line (learning over a period): tuning does not "
-                          "differentiate through it; tune another law")
-    why = getattr(loop.controller, "not_differentiable", None)  # a law's own hook: why jax.grad cannot go through it
-    if why:
-        raise ConfigError("controller", f"{name} {why}")

@@ -316,9 +316,10 @@ class RK4Step:
         recomputed from them by the pure maps, as :func:`robotadapt.sim.outputs.outputs` does."""
         return records, self.loop.plant.saturate(self.loop.torque(t, records, ref))
 
-    def start(self, z0: Array) -> tuple[Array, None]:
-        """The carry before step 0 without a delay line."""
-        return z0, None
+    def start(self, z0: Array, line: Array | None = None) -> tuple[Array, Ring | None]:
+        """The carry before step 0: z0 and the delay line from its initial contents `line` (None: no line), in z0's
+        array namespace (as :meth:`robotadapt.sim.sampled.Tick.start`)."""
+        return z0, None if line is None else Ring.start(array_namespace(z0).asarray(line))
 
     def status(self, k: int, why: int, bad: Array | None) -> Status:
         t = k * self.dt

@@ -20,8 +20,9 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass, field, replace
-from typing import Any
+from dataclasses import dataclass, field, fields, is_dataclass, replace
+from functools import reduce
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -41,7 +42,11 @@ SHARPNESS = 200.0  # β of the smooth maximum LSE_β(|τ|/T): above the true max
 DIVERGED = 1e10  # the scaled objective of a run that diverged (the line search steps back)
 OUTER = 6  # most augmented-Lagrangian rounds
 RHO0 = 100.0  # the first penalty weight ρ (on the objective scaled to 1 at the start)
+FORWARD_MODE = 8  # gradients by forward mode up to this many θ entries, by reverse mode beyond
+FTOL = 1e-12  # L-BFGS-B stops a round when the scaled objective improves by less than this
 AUTO_SURFACE = 9  # points per axis of the surface drawn when exactly two scalar gains are tuned
+SCREEN, SPREAD = 64, 10.0  # the batched screen's forward runs, and its range about θ₀ of a gain without a box
+WIDTH0, NARROWING = 0.1, 10.0  # a switching law's surrogate: its first width, and the factor of each round after
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,9 +81,30 @@ def closed_loop(scenario: Scenario) -> ClosedLoop:
     return loop
 
 
+def switching_parts(obj: Any, path: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    """The paths (from the controller) of the parts of a law that switch or kink — k_d sgn(r) (6.7.6), the σ ramp of
+    (6.7.14) — found by their `surrogate(width)` hook: the smooth stand-ins tuning differentiates (module docstring)."""
+    if callable(getattr(obj, "surrogate", None)):
+        return [path]
+    if not is_dataclass(obj) or isinstance(obj, type):
+        return []
+    return [p for f in fields(obj) if f.name != "model" for p in switching_parts(getattr(obj, f.name), path + (f.name,))]
+
+
+def smoothed(loop: ClosedLoop, parts: list[tuple[str, ...]], width: Any) -> ClosedLoop:
+    """`loop` with each switching part replaced by its surrogate of `width` (traced or not)."""
+    for part in parts:
+        path = ("controller",) + part
+        component: Any = reduce(getattr, path, loop)
+        loop = replace_at(loop, path, replace_at(component.surrogate(1.0), ("width",), width))
+    return loop
+
+
 class Problem:
-    """The differentiable objective of a scenario in the varied gains: `evaluate(θ, μ, ρ)` → (augmented objective,
-    its gradient, the objective, the exact peak torque, whether every run stayed finite), one jitted program."""
+    """The differentiable objective of a scenario in the varied gains: `evaluate(θ, μ, ρ, width)` → (augmented
+    objective, its gradient, the objective, the exact peak torque, whether every run stayed finite), one jitted program.
+    For a law that switches (`switching_parts`), the program runs its smooth surrogate of the given width;
+    `objectives` always runs the exact law."""
 
     def __init__(self, scenario: Scenario, gains: list[Gain], objective: Objective, max_torque: float | None,
                  phis: Array | None = None) -> None:
@@ -90,6 +116,7 @@ class Problem:
         seen = (s.q0, s.dq0)
         if isinstance(s.integrator, Sampled) and s.plant.sensor is not None:  # what the law measures first
             seen = s.plant.sensor.first_measurement(s.q0, s.dq0, s.integrator.control_period)
+        self.switching = switching_parts(ctrl)
         self.x0 = ctrl.initial_state(*seen)
         self.s0 = s.plant.initial_state(s.q0, s.dq0)
         self.trajectory, self.max_state = s.trajectory, s.max_state
@@ -97,7 +124,9 @@ class Problem:
         jax = jax_module()
         self.theta0 = np.concatenate([g.theta0() for g in gains])
         self.scale = 1.0  # the objective at θ₀ once known: L-BFGS-B sees J/J(θ₀)
-        self._program = jax.jit(jax.value_and_grad(self._augmented, has_aux=True))
+        self.forward_mode = self.theta0.size <= FORWARD_MODE
+        self._program = jax.jit(self._forward_mode if self.forward_mode else
+                                jax.value_and_grad(self._augmented, has_aux=True))
         self._forward: Any = None
 
     def admissible(self, theta: Array) -> bool:
@@ -112,11 +141,13 @@ class Problem:
             return False
         return True
 
-    def terms(self, theta: Array, phi: Array) -> tuple[dict[str, Array], Array, Array]:
+    def terms(self, theta: Array, phi: Array, width: Array | None = None) -> tuple[dict[str, Array], Array, Array]:
         """The objective terms of one run with the gains of θ and the true φ (traced), |τ_i(t_k)|/T at every sample and
-        whether the run stayed finite and within `max_state`."""
+        whether the run stayed finite and within `max_state`; a switching law's surrogate of `width` when given."""
         jnp = jax_module().numpy
         loop = replace_at(self.loop, ("plant", "phi"), phi)
+        if width is not None and self.switching:
+            loop = smoothed(loop, self.switching, width)
         x0 = jnp.asarray(self.x0)
         for gain, part in zip(self.gains, split(self.gains, theta), strict=True):
             g = gain.gain(part)
@@ -128,14 +159,28 @@ class Problem:
         values = objective_terms(t, e, tau)
         return values, jnp.abs(tau) / (self.max_torque or 1.0), ok
 
-    def _augmented(self, theta: Array, mu: Array, rho: Array, scale: Array) -> tuple[Array, tuple[Array, ...]]:
+    def _augmented(self, theta: Array, mu: Array, rho: Array, scale: Array,
+                   width: Array) -> tuple[Array, tuple[Array, ...]]:
         jax = jax_module()
         jnp = jax.numpy
-        values, ratio, ok = jax.vmap(lambda phi: self.terms(theta, phi))(self.phis)
+        values, ratio, ok = jax.vmap(lambda phi: self.terms(theta, phi, width))(self.phis)
         objective = jnp.mean(self.objective.value(values))
         g = jax.scipy.special.logsumexp(SHARPNESS * ratio) / SHARPNESS - 1.0  # over every sample of every run
         penalty = (jnp.maximum(0.0, mu + rho * g) ** 2 - mu**2) / (2.0 * rho) if self.max_torque else 0.0 * g
         return objective / scale + penalty, (objective, jnp.max(values["max_abs_torque"]), g, jnp.all(ok))
+
+    def _forward_mode(self, *args: Array) -> tuple[tuple[Array, tuple[Array, ...]], Array]:
+        """`value_and_grad` of the augmented objective by forward mode (the θ entries' tangents carried through the run
+        with it, vmapped): for few gains about half the time of reverse mode through the checkpointed blocks
+        (docs/tuning.md#how), and no stored blocks."""
+        jax = jax_module()
+
+        def with_value(theta: Array, *rest: Array) -> tuple[Array, tuple[Array, tuple[Array, ...]]]:
+            value, aux = self._augmented(theta, *rest)
+            return value, (value, aux)
+
+        grad, out = jax.jacfwd(with_value, has_aux=True)(*args)
+        return out, grad
 
     @float64
     def objectives(self, thetas: Array) -> tuple[Array, Array]:
@@ -155,10 +200,12 @@ class Problem:
         return np.asarray(objective), np.asarray(peak)
 
     @float64
-    def evaluate(self, theta: Array, mu: float = 0.0, rho: float = 1.0) -> tuple[float, Array, float, float, float,
-                                                                                     bool]:
-        """(scaled augmented objective, its gradient, objective, exact peak torque, smooth constraint g, finite)."""
-        (value, (objective, peak, g, ok)), grad = self._program(np.asarray(theta, dtype=float), mu, rho, self.scale)
+    def evaluate(self, theta: Array, mu: float = 0.0, rho: float = 1.0,
+                 width: float = WIDTH0) -> tuple[float, Array, float, float, float, bool]:
+        """(scaled augmented objective, its gradient, objective, exact peak torque, smooth constraint g, finite); of the
+        surrogate of `width` for a switching law."""
+        (value, (objective, peak, g, ok)), grad = self._program(np.asarray(theta, dtype=float), mu, rho, self.scale,
+                                                                width)
         return float(value), np.asarray(grad), float(objective), float(peak), float(g), bool(ok)
 
 
@@ -189,6 +236,15 @@ class _OutOfRuns(Exception):
     pass
 
 
+class Evaluation(NamedTuple):
+    """One evaluated θ: the objective and the exact peak torque there, and the seconds since the search began."""
+
+    theta: Array
+    objective: float
+    peak: float
+    seconds: float
+
+
 @dataclass(eq=False)
 class Search:
     """The optimiser's state: every evaluation (θ, objective, peak torque), the iterations and the run count."""
@@ -198,24 +254,33 @@ class Search:
     bar: Any
     runs: int = 0
     iterations: list[Iteration] = field(default_factory=list)
-    evaluated: list[tuple[Array, float, float]] = field(default_factory=list)
+    evaluated: list[Evaluation] = field(default_factory=list)
     seen: dict[bytes, tuple[float, float, float, float]] = field(default_factory=dict)  # θ → J, peak, ‖∇‖, g
+    rescored: int = 0  # forward runs of the exact law that scored a switching law's evaluations again
+    screened: int = 0  # forward runs of the batched screen that chose the start
+    began: float = field(default_factory=time.perf_counter)
+    last: tuple[Any, float, Array] | None = None  # (θ, μ, ρ, width, scale), value, gradient of the last evaluation
 
-    def fun(self, theta: Array, mu: float, rho: float) -> tuple[float, Array]:
-        """The scaled augmented objective and its gradient at θ (one run per true-parameter set)."""
+    def fun(self, theta: Array, mu: float, rho: float, width: float) -> tuple[float, Array]:
+        """The scaled augmented objective and its gradient at θ (one run per true-parameter set; a switching law's
+        surrogate of `width`); the last point asked again (a round's start) costs no run."""
+        key = (np.asarray(theta, dtype=float).tobytes(), mu, rho, width, self.problem.scale)
+        if self.last is not None and self.last[0] == key:
+            return self.last[1], self.last[2].copy()
         if self.runs + len(self.problem.phis) > self.max_runs:
             raise _OutOfRuns
         if not self.problem.admissible(theta):
             return DIVERGED, np.zeros_like(theta)
-        value, grad, objective, peak, g, ok = self.problem.evaluate(theta, mu, rho)
+        value, grad, objective, peak, g, ok = self.problem.evaluate(theta, mu, rho, width)
         self.runs += len(self.problem.phis)
         self.bar.update(len(self.problem.phis))
         if not (ok and np.isfinite(value)):
             return DIVERGED, np.zeros_like(theta)
-        self.evaluated.append((np.array(theta), objective, peak))
+        self.evaluated.append(Evaluation(np.array(theta), objective, peak, time.perf_counter() - self.began))
         with np.errstate(over="ignore"):  # a gradient near divergence may overflow its norm
             self.seen[np.asarray(theta).tobytes()] = (objective, peak, float(np.linalg.norm(grad)), g)
-        return value, grad
+        self.last = (key, value, grad)
+        return value, grad.copy()
 
     def record(self, theta: Array) -> None:
         """The callback of each L-BFGS-B iteration: log the iterate."""
@@ -228,41 +293,105 @@ class Search:
         hit = self.seen.get(np.asarray(theta).tobytes())
         return np.inf if hit is None else hit[3]
 
+    def rescore(self) -> None:
+        """A switching law's evaluations scored again by forward runs of the exact law (vmapped): the surrogate only
+        guided the search, the answer is chosen on the law itself; θ whose exact run diverges are dropped."""
+        if not (self.problem.switching and self.evaluated):
+            return
+        objective, peak = self.problem.objectives(np.stack([e.theta for e in self.evaluated]))
+        self.rescored = len(self.evaluated) * len(self.problem.phis)
+        self.evaluated = [e._replace(objective=float(j), peak=float(p))
+                          for e, j, p in zip(self.evaluated, objective, peak, strict=True) if np.isfinite(j)]
+
+    def screen(self, thetas: Array) -> Array:
+        """The batched screen (forward runs of the exact law, vmapped): every row of `thetas` scored, kept as an
+        evaluation; returns the row of least objective within the budget, else of least peak torque."""
+        thetas = np.array([th for th in thetas if self.problem.admissible(th)] or thetas[:1])
+        objective, peak = self.problem.objectives(thetas)
+        self.screened = thetas.shape[0] * len(self.problem.phis)
+        now = time.perf_counter() - self.began
+        found = [Evaluation(th, float(j), float(p), now) for th, j, p in zip(thetas, objective, peak, strict=True)
+                 if np.isfinite(j)]
+        self.evaluated.extend(found)
+        budget = self.problem.max_torque
+        fits = [e for e in found if budget is None or e.peak <= budget]
+        if fits:
+            return min(fits, key=lambda e: e.objective).theta
+        return min(found, key=lambda e: e.peak).theta if found else thetas[0]
+
+    def reached(self, objective: float, budget: float | None) -> Evaluation | None:
+        """The first evaluation within the budget whose objective is at most `objective` (benchmarks)."""
+        return next((e for e in self.evaluated if e.objective <= objective and (budget is None or e.peak <= budget)),
+                    None)
+
     def best(self, budget: float | None) -> Array:
         """The evaluated θ of least objective that meets the budget exactly, else the one of least peak torque."""
-        fits = [e for e in self.evaluated if budget is None or e[2] <= budget]
+        fits = [e for e in self.evaluated if budget is None or e.peak <= budget]
         if fits:
-            return min(fits, key=lambda e: e[1])[0]
-        return min(self.evaluated, key=lambda e: e[2])[0] if self.evaluated else self.problem.theta0
+            return min(fits, key=lambda e: e.objective).theta
+        return min(self.evaluated, key=lambda e: e.peak).theta if self.evaluated else self.problem.theta0
 
 
-def optimise(problem: Problem, max_runs: int, progress: bool = False) -> Search:
-    """L-BFGS-B on the scaled objective; with a budget, augmented-Lagrangian rounds (module docstring)."""
+def screen_points(problem: Problem, count: int, seed: int = 0) -> Array:
+    """`count` rows of θ for the batched screen: θ₀ (clipped into the boxes) first, then a Latin hypercube over each
+    entry's box, or over ±ln `SPREAD` around θ₀ for an unboxed log gain (a Cholesky factor's off-diagonal entries stay)."""
+    from scipy.stats import qmc
+
+    lo: list[float] = []
+    hi: list[float] = []
+    spread: list[float] = []
+    for g in problem.gains:
+        logs = np.ones(g.size, bool) if g.form != "matrix" else np.equal(*np.tril_indices(g.dim))
+        for (a, b), is_log in zip(g.bounds(), logs, strict=True):
+            lo.append(-np.inf if a is None else a)
+            hi.append(np.inf if b is None else b)
+            spread.append(np.log(SPREAD) if is_log else 0.0)
+    lower, upper, half = np.array(lo), np.array(hi), np.array(spread)
+    theta0 = np.clip(problem.theta0, lower, upper)
+    boxed = np.isfinite(lower) & np.isfinite(upper)
+    start, end = np.where(boxed, lower, theta0 - half), np.where(boxed, upper, theta0 + half)
+    unit = qmc.LatinHypercube(d=theta0.size, seed=seed).random(max(count - 1, 0))
+    return np.vstack([theta0, start + unit * (end - start)])
+
+
+def optimise(problem: Problem, max_runs: int, progress: bool = False, screen: int = SCREEN) -> Search:
+    """A batched screen of `screen` forward runs chooses the start (none for `screen` ≤ 1); then L-BFGS-B on the scaled
+    objective, with a budget in augmented-Lagrangian rounds (module docstring)."""
     from scipy.optimize import minimize
     from tqdm import tqdm
 
     bounds = [b for g in problem.gains for b in g.bounds()]
-    theta = np.clip(problem.theta0, [lo if lo is not None else -np.inf for lo, _ in bounds],
-                    [hi if hi is not None else np.inf for _, hi in bounds])
     quiet = not (progress and sys.stderr.isatty())
     with tqdm(total=max_runs, disable=quiet, unit="run", file=sys.stderr, leave=False) as bar:
         search = Search(problem, max_runs, bar)
-        mu, rho = 0.0, RHO0
+        points = screen_points(problem, max(screen, 1))
+        theta = search.screen(points) if screen > 1 else points[0]
+        mu, rho, width = 0.0, RHO0, WIDTH0
+        rounds = OUTER if problem.max_torque or problem.switching else 1
         try:
-            search.fun(theta, mu, rho)
+            known = [e.objective for e in search.evaluated if np.array_equal(e.theta, theta)]
+            if not known or problem.switching:  # the scale is the start's objective (the surrogate's for a switching law)
+                before = len(search.evaluated)
+                search.fun(theta, mu, rho, width)
+                known = [search.evaluated[-1].objective] if len(search.evaluated) > before else [1.0]
+            problem.scale = known[0] if np.isfinite(known[0]) and known[0] > 0 else 1.0
             search.record(theta)
-            start = search.evaluated[0][1] if search.evaluated else 1.0
-            problem.scale = start if np.isfinite(start) and start > 0 else 1.0
-            for _ in range(OUTER if problem.max_torque else 1):
-                out = minimize(search.fun, theta, args=(mu, rho), jac=True, method="L-BFGS-B", bounds=bounds,
-                               callback=search.record, options={"maxfun": max(1, max_runs - search.runs),
-                                                                "gtol": 1e-9, "ftol": 1e-12})
+            for k in range(rounds):
+                left = max_runs - search.runs  # a switching law's rounds share the runs: each narrows the surrogate
+                out = minimize(search.fun, theta, args=(mu, rho, width), jac=True, method="L-BFGS-B", bounds=bounds,
+                               callback=search.record,
+                               options={"maxfun": max(1, left // (rounds - k) if problem.switching else left),
+                                        "gtol": 1e-9, "ftol": FTOL})
                 theta, g = out.x, search.constraint(out.x)
-                if problem.max_torque is None or (g <= 1e-4 and abs(mu * g) < 1e-4):
+                met = problem.max_torque is None or (g <= 1e-4 and abs(mu * g) < 1e-4)
+                if met and not problem.switching:
                     break
-                mu, rho = max(0.0, mu + rho * g), rho * (10.0 if g > 0 else 1.0)
+                if not met:
+                    mu, rho = max(0.0, mu + rho * g), rho * (10.0 if g > 0 else 1.0)
+                width /= NARROWING
         except _OutOfRuns:
             pass
+    search.rescore()
     return search
 
 
@@ -321,8 +450,9 @@ class Tuned:
 
     @property
     def forward_runs(self) -> int:
-        """The normal forward runs that scored the start and the answer (one per true-parameter set each)."""
-        return len(self.before.per_sample) + len(self.after.per_sample)
+        """The forward runs: the batched screen, those that scored the start and the answer (one per true-parameter set
+        each) and, for a switching law, its evaluations scored again on the exact law."""
+        return len(self.before.per_sample) + len(self.after.per_sample) + self.search.rescored + self.search.screened
 
     @property
     def feasible(self) -> bool:
@@ -343,6 +473,7 @@ class Tuned:
                             "gradient_norm": it.gradient_norm, "runs": it.runs} for it in self.search.iterations],
             "runs": self.search.runs + self.forward_runs,
             "differentiated_runs": self.search.runs, "forward_runs": self.forward_runs,
+            "screened_runs": self.search.screened,
             "peak_elasticity": self.peak_elasticity,
             "over": None if self.over is None else {"plant.phi": self.over.tolist(),
                                                     "objective_per_sample": self.after.per_sample},
@@ -355,7 +486,7 @@ class Tuned:
 
 def tune(scenario: Scenario, vary: list[str], objective: str, max_torque: float | None = None, *,
          over: str | None = None, samples: int = 8, seed: int = 0, max_runs: int = 100,
-         surface_points: int | None = None, progress: bool = False) -> Tuned:
+         surface_points: int | None = None, progress: bool = False, screen: int = SCREEN) -> Tuned:
     """Tune the gains `vary` names to minimise `objective` under the torque budget `max_torque` (N·m or N), over
     `samples` true-parameter sets drawn in the box `over` when given; at most `max_runs` differentiated runs. With
     `surface_points` K > 0, the objective over a K × K grid of the first two scalar gains (:func:`surface`, checked
@@ -380,7 +511,7 @@ def tune(scenario: Scenario, vary: list[str], objective: str, max_torque: float 
     phis = None if over is None else draw_over(scenario, over, samples, seed)[1]
     problem = Problem(scenario, gains, goal, max_torque, phis)
     before = score(scenario, goal, phis)
-    search = optimise(problem, max_runs, progress)
+    search = optimise(problem, max_runs, progress, screen)
     theta = search.best(max_torque)
     tuned = tuned_scenario(scenario, gains, theta)
     after = score(tuned, goal, phis)
