@@ -12,9 +12,10 @@ import pytest
 
 from robotadapt.cli import main
 from robotadapt.sim.gradient import Rollout
-from robotadapt.studies.gain_space import locate, parse_objective, tuned_scenario
+from robotadapt.studies.gain_space import locate, parse_objective
 from robotadapt.studies.scenarios import load
 from robotadapt.studies.tune import Problem, closed_loop, score
+from tuning_checks import RELATIVE, central_differences
 
 T = 0.5  # the period: q_d = 0.1 sin(4πt), N = 200 steps of it, 2.5 periods (the ring wraps twice)
 SETS = [f"trajectory.omega={2 * math.pi / T!r}", "trajectory.amplitude=0.1", f"controller.period={T!r}",
@@ -52,12 +53,8 @@ def test_gradients_equal_central_differences_of_forward_runs():
     theta = problem.theta0
     _, grad, objective, _, g, _ = problem.evaluate(theta)
     assert g < 0 and objective == pytest.approx(score(scenario, goal).objective, rel=1e-9)
-    h, fd = 1e-5, np.empty_like(theta)
-    for k in range(theta.size):
-        step = h * np.eye(theta.size)[k]
-        fd[k] = (score(tuned_scenario(scenario, gains, theta + step), goal).objective
-                 - score(tuned_scenario(scenario, gains, theta - step), goal).objective) / (2 * h)
-    assert np.max(np.abs(grad - fd)) <= 1e-6 * np.max(np.abs(fd)), (grad, fd)
+    fd = central_differences(scenario, gains, goal, theta)
+    assert np.max(np.abs(grad - fd)) <= RELATIVE * np.max(np.abs(fd)), (grad, fd)
 
 
 def test_tune_improves_within_the_budget_and_run_reproduces_it(tmp_path, capsys):

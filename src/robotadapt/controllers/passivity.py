@@ -11,12 +11,14 @@ so that r = H⁻¹(s) e = ė + w (6.4.1), and the signals of (6.4.3) need no joi
 
 H(s) = (sI + G(s))⁻¹ has the realization (state [e; ξ], input r, output e) with state matrix [[−D, −C], [B, A]]: it is
 strictly proper by construction, and stable when every eigenvalue of that matrix has a negative real part, which
-:class:`ServoFilter` checks. The update law is any part of :mod:`robotadapt.controllers.adaptation` that satisfies (6.4.4).
+every :class:`Servo` checks at construction. The PD and PID servos hold their gains Λ, Ψ and read D = Λ, C = Ψ off
+them, so `robotadapt tune` varies the gains themselves. The update law is any part of
+:mod:`robotadapt.controllers.adaptation` that satisfies (6.4.4).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -41,37 +43,18 @@ def _matrix(value: Any, shape: tuple[int, int], field: str) -> Array:
     return arr
 
 
-@dataclass(frozen=True, eq=False)
-class ServoFilter:
-    """G(s) = K(s)/s = D + C (sI − A)⁻¹ B, the servo filter of the passivity-based class (6.4.2).
+class Servo:
+    """A servo filter G(s) = K(s)/s = D + C (sI − A)⁻¹ B of the passivity-based class (6.4.2), by its matrices: D n×n,
+    A m×m, B m×n, C n×m, with m ≥ 0 filter states ξ (m = 0: G(s) = D is static). :class:`ServoFilter` holds them;
+    :class:`PdServo` and :class:`PidServo` hold their gains, fix A and B by n and read D (and C) off the gains, so a
+    gain set on a built servo (a traced one when `robotadapt tune` varies Λ or Ψ) is the D and C the law uses. Every
+    servo checks at construction that H(s) = (sI + G(s))⁻¹ is stable (6.4.19)."""
 
-    Shapes: D n×n, A m×m, B m×n, C n×m, with m ≥ 0 filter states ξ (m = 0: G(s) = D is static). Construction checks
-    the shapes and that H(s) = (sI + G(s))⁻¹ is stable (6.4.19): every eigenvalue of [[−D, −C], [B, A]] must have a
-    negative real part, else a ConfigError naming `controller.servo`.
-    """
-
-    D: Any
-    A: Any
-    B: Any
-    C: Any
-
-    def __post_init__(self) -> None:
-        D = as_array(self.D, f"{_SERVO}.D")
-        if D.ndim != 2 or D.shape[0] != D.shape[1]:
-            raise ConfigError(f"{_SERVO}.D", f"expected a square matrix, got shape {D.shape}")
-        A = as_array(self.A, f"{_SERVO}.A")
-        m = 0 if A.size == 0 else (A.shape[0] if A.ndim else 1)
-        n = D.shape[0]
-        freeze(self, D=D, A=_matrix(A, (m, m), f"{_SERVO}.A"), B=_matrix(self.B, (m, n), f"{_SERVO}.B"),
-               C=_matrix(self.C, (n, m), f"{_SERVO}.C"))
-        lead = float(np.max(np.linalg.eigvals(self.state_matrix).real))
-        if not lead < -1e-12 * max(1.0, float(np.abs(self.state_matrix).max())):
-            raise ConfigError(_SERVO, f"H(s) = (sI + G(s))^-1 is not stable: its state matrix [[-D, -C], [B, A]] has an "
-                              f"eigenvalue with real part {lead:.3g} (every real part must be negative)")
-
-    @property
-    def n(self) -> int:
-        return int(self.D.shape[0])
+    D: Array
+    A: Array
+    B: Array
+    C: Array
+    n: int
 
     @property
     def m(self) -> int:
@@ -83,19 +66,89 @@ class ServoFilter:
         """[[−D, −C], [B, A]]: the state matrix of H(s), state [e; ξ], input r (ė = r − D e − C ξ)."""
         return np.block([[-self.D, -self.C], [self.B, self.A]])
 
+    def _check_stable(self) -> None:
+        """H(s) stable (6.4.19): every eigenvalue of [[−D, −C], [B, A]] has a negative real part, else a ConfigError
+        naming `controller.servo`."""
+        lead = float(np.max(np.linalg.eigvals(self.state_matrix).real))
+        if not lead < -1e-12 * max(1.0, float(np.abs(self.state_matrix).max())):
+            raise ConfigError(_SERVO, f"H(s) = (sI + G(s))^-1 is not stable: its state matrix [[-D, -C], [B, A]] has an "
+                              f"eigenvalue with real part {lead:.3g} (every real part must be negative)")
 
-def pd_servo(n: int, Lam: Any) -> ServoFilter:
-    """K(s) = Λ s, i.e. G(s) = Λ: r = ė + Λe, Slotine–Li as a member of the class (Example 6.4.2). No state."""
-    Lam = as_gain(Lam, n, f"{_SERVO}.Lam")
-    return ServoFilter(D=Lam, A=np.zeros((0, 0)), B=np.zeros((0, n)), C=np.zeros((n, 0)))
+    def _check_gains(self, *names: str) -> None:
+        """The named gains as n×n SPD matrices (a number k is k·I, a list the diagonal), then H(s) stable (6.4.19)."""
+        freeze(self, **{name: as_gain(getattr(self, name), self.n, f"{_SERVO}.{name}") for name in names})
+        self._check_stable()
 
 
-def pid_servo(n: int, Lam: Any, Psi: Any) -> ServoFilter:
-    """K(s) = Λ s + Ψ (Example 6.4.3 (3)): ξ = ε = ∫ e, r = ė + Λe + Ψε, so that K_v r is the PID law
-    K_v ė + K_p e + K_I ∫e with K_p = K_v Λ, K_I = K_v Ψ; h_i(s) = s / (s² + λ_i s + ψ_i) (Example 6.4.3 (5))."""
-    Lam = as_gain(Lam, n, f"{_SERVO}.Lam")
-    Psi = as_gain(Psi, n, f"{_SERVO}.Psi")
-    return ServoFilter(D=Lam, A=np.zeros((n, n)), B=np.eye(n), C=Psi)
+@dataclass(frozen=True, eq=False)
+class ServoFilter(Servo):
+    """Any proper G(s) = D + C (sI − A)⁻¹ B (6.4.2) given by its matrices. Construction checks the shapes and that
+    H(s) is stable (6.4.19)."""
+
+    D: Any
+    A: Any
+    B: Any
+    C: Any
+    n: int = field(init=False, repr=False, metadata={"internal": True})
+
+    def __post_init__(self) -> None:
+        D = as_array(self.D, f"{_SERVO}.D")
+        if D.ndim != 2 or D.shape[0] != D.shape[1]:
+            raise ConfigError(f"{_SERVO}.D", f"expected a square matrix, got shape {D.shape}")
+        A = as_array(self.A, f"{_SERVO}.A")
+        m = 0 if A.size == 0 else (A.shape[0] if A.ndim else 1)
+        n = D.shape[0]
+        freeze(self, D=D, A=_matrix(A, (m, m), f"{_SERVO}.A"), B=_matrix(self.B, (m, n), f"{_SERVO}.B"),
+               C=_matrix(self.C, (n, m), f"{_SERVO}.C"), n=n)
+        self._check_stable()
+
+
+@dataclass(frozen=True, eq=False)
+class PdServo(Servo):
+    """K(s) = Λ s, i.e. G(s) = D = Λ in (6.4.2): r = ė + Λe, Slotine–Li as a member of the class (Example 6.4.2). No
+    state."""
+
+    n: int
+    Lam: Any
+    A: Array = field(init=False, repr=False, metadata={"internal": True})
+    B: Array = field(init=False, repr=False, metadata={"internal": True})
+    C: Array = field(init=False, repr=False, metadata={"internal": True})
+
+    def __post_init__(self) -> None:
+        freeze(self, A=np.zeros((0, 0)), B=np.zeros((0, self.n)), C=np.zeros((self.n, 0)))
+        self._check_gains("Lam")
+
+    @property
+    def D(self) -> Array:
+        return self.Lam
+
+
+@dataclass(frozen=True, eq=False)
+class PidServo(Servo):
+    """K(s) = Λ s + Ψ (Example 6.4.3 (3)), in (6.4.2) D = Λ, A = 0, B = I, C = Ψ: ξ = ε = ∫ e, r = ė + Λe + Ψε, so
+    that K_v r is the PID law K_v ė + K_p e + K_I ∫e with K_p = K_v Λ, K_I = K_v Ψ; h_i(s) = s / (s² + λ_i s + ψ_i)
+    (Example 6.4.3 (5))."""
+
+    n: int
+    Lam: Any
+    Psi: Any
+    A: Array = field(init=False, repr=False, metadata={"internal": True})
+    B: Array = field(init=False, repr=False, metadata={"internal": True})
+
+    def __post_init__(self) -> None:
+        freeze(self, A=np.zeros((self.n, self.n)), B=np.eye(self.n))
+        self._check_gains("Lam", "Psi")
+
+    @property
+    def D(self) -> Array:
+        return self.Lam
+
+    @property
+    def C(self) -> Array:
+        return self.Psi
+
+
+pd_servo, pid_servo = PdServo, PidServo  # the scenario kinds `pd` and `pid` (their keys: the fields after n)
 
 
 def state_space_servo(n: int, D: Any, A: Any, B: Any, C: Any) -> ServoFilter:
@@ -134,7 +187,7 @@ class PassivityBased:
     """
 
     model: RobotModel
-    servo: ServoFilter
+    servo: Servo
     Kv: Any
     law: UpdateLaw
     phi_hat0: Any
@@ -142,7 +195,7 @@ class PassivityBased:
     def __post_init__(self) -> None:
         gains(self, ("Kv",), self.model.n)
         estimate(self)
-        if not isinstance(self.servo, ServoFilter):
+        if not isinstance(self.servo, Servo):
             raise ConfigError(_SERVO, f"expected a servo filter (pd, pid or state_space), got {self.servo!r}")
         if self.servo.n != self.model.n:
             raise ConfigError(_SERVO, f"the servo filter is for {self.servo.n} joints, the robot has {self.model.n}")

@@ -53,7 +53,7 @@ class Repetitive:
 
     û_d learns the repeatable dynamics u_d(t) = Y_d φ (7.2.29): the torque and the learning law need no regressor and
     no model. û_d(t − T) is read from a delay line of N = T/dt samples (the step must divide the period) and held over
-    each step; û_d = 0 on [−T, 0). With `rounded_delay` (Python only: `robotadapt compare` keeps a scenario's step) a
+    each step; û_d = 0 on [−T, 0). With `rounded_delay` (what `robotadapt compare` sets to keep a scenario's step) a
     step that does not divide T is accepted and N = round(T/dt): the law is (7.2.32) with the delay T' = N·dt, within
     dt/2 of T, so u_d(t) − u_d(t − T') = O(|T − T'|·‖u̇_d‖) enters (7.2.34) each period, e → 0 becomes a residual of
     that order, and V's window integrals run over T'. The saturation bounds must contain u_d(t) along the trajectory.
@@ -99,7 +99,7 @@ class Repetitive:
     u_max: Any = None
     gram: Any = field(default=None, metadata={"internal": True})  # G = ∫_0^T Y_dᵀY_d (no gain in it), from `prepare`
     table: PeriodicRegressorTable | None = field(default=None, metadata={"internal": True})
-    rounded_delay: bool = field(default=False, metadata={"internal": True})  # N = round(T/dt) (class docstring)
+    rounded_delay: bool = False  # N = round(T/dt) (class docstring)
 
     def __post_init__(self) -> None:
         for name in ("Kv", "Kp", "Ka", "kL"):

@@ -451,6 +451,14 @@ def write_comparison(base: Scenario, rows: list[Row], skipped: dict[str, str], o
         drawn = None if shown == output else render(fig, shown)
         path = save_figure(fig, out / output.name(name), output)
         images[name] = _data_uri(path.read_bytes() if drawn is None else drawn, shown.format)
+    if budget is not None:  # each row's scenario as it ran, tuned: `robotadapt run` reproduces the row
+        (out / "tuned").mkdir(exist_ok=True)
+        for r in rows:
+            header = (f"# robotadapt compare {base.name} --fair: {r.entry.label}, {budget['objective']} "
+                      f"{r.metrics['objective']:.12g}, max |tau| {r.metrics['peak_torque']:.6g} (budget "
+                      f"{budget['max_torque']:g})\n")
+            atomic_write(out / "tuned" / f"{r.entry.name}.toml", lambda f, r=r, h=header: f.write(h + r.entry.scenario.text))
+            r.metrics["scenario_file"] = f"tuned/{r.entry.name}.toml"
     atomic_write(out / "comparison.json", lambda f: json.dump(
         {"scenario": base.name, "fair": budget, "rows": [r.metrics for r in rows], "skipped": skipped}, f, indent=2))
     atomic_write(out / "report.html", lambda f: f.write(comparison_html(base, rows, skipped, images, budget)))

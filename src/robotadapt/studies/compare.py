@@ -363,10 +363,8 @@ def _entry(base: Scenario, name: str, label: str, source: str, section: dict[str
             miss = round(steps) * h - period
             notes.append(f"delay line N = round(T/{step}) = {round(steps)} steps: N·{step} = T {'+−'[miss < 0]} "
                          f"{abs(miss):.3g} s (Table 7.2.2's delay to within {step}/2)")
-    built = setup(data)
-    if rounded:
-        built = replace(built, controller=replace(built.controller, rounded_delay=True))
-    return Entry(name, label, source, Scenario(f"{base.name} [{name}]", data, built), "; ".join(notes), reference)
+            data["controller"]["rounded_delay"] = True
+    return Entry(name, label, source, Scenario(f"{base.name} [{name}]", data, setup(data)), "; ".join(notes), reference)
 
 
 def lineup(base: Scenario, names: list[str] | None = None) -> tuple[list[Entry], dict[str, str]]:
@@ -460,9 +458,12 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
     """The fair comparison: every entry of :func:`lineup` with its own gains tuned (`tunable`) to the same `objective`
     under the same torque budget (:func:`robotadapt.studies.tune.tune`, at most `max_runs` runs each), then run as
     :func:`compare` runs it. A law that cannot be differentiated keeps the lineup's gains, and its row says why; each row
-    holds `tuned_gains`, `within_budget` and `tune_runs`."""
+    holds `tuned_gains`, `within_budget`, `tune_runs` and `tune_converged` (the search ended by its own test, not by
+    `max_runs`)."""
+    from .gain_space import parse_objective
     from .tune import closed_loop, tune
 
+    goal = parse_objective(objective)
     entries, skipped = lineup(base, names)
     rows = []
     for entry in entries:
@@ -475,15 +476,17 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
         except ConfigError as exc:
             note = "; ".join(filter(None, (entry.note, f"lineup gains: not tuned ({brief(exc)})")))
             row = _row(replace(entry, note=note), progress)
-            row.metrics.update(tuned_gains=None, tune_runs=0)
+            row.metrics.update(tuned_gains=None, tune_runs=0, tune_converged=None)
         else:
             gains = tuned.summary()["gains"]
             row = _row(replace(entry, scenario=tuned.scenario, source=f"{entry.source}; tuned: {', '.join(fields)}"),
                        progress)
-            row.metrics.update(tuned_gains=gains, tune_runs=tuned.summary()["runs"])
+            row.metrics.update(tuned_gains=gains, tune_runs=tuned.summary()["runs"], tune_converged=tuned.search.converged)
         row.metrics["within_budget"] = row.result.ok and row.metrics["peak_torque"] <= max_torque
+        row.metrics["objective"] = goal.of_metrics(metrics(row.result))
         rows.append(row)
         if progress:
             print(f"{entry.name}: {row.result.status}, RMS ‖e‖ {row.metrics['rms_error_norm']:.4g}, peak |τ| "
-                  f"{row.metrics['peak_torque']:.4g}, {row.metrics['tune_runs']} tuning runs", flush=True)
+                  f"{row.metrics['peak_torque']:.4g}, {row.metrics['tune_runs']} tuning runs"
+                  + (", converged" if row.metrics["tune_converged"] else ""), flush=True)
     return rows, skipped

@@ -179,8 +179,7 @@ def locate(scenario: Scenario, spec: str) -> Gain:
     ctrl = scenario.setup.controller
     attr = reduce(lambda obj, key: getattr(obj, key, None), parts[1:], ctrl)
     if not (isinstance(attr, float) or (isinstance(attr, np.ndarray) and attr.ndim == 2)):
-        raise ConfigError(name, "is not a gain the law holds as a number or a matrix (a servo filter holds the "
-                          "matrices it builds from its gains, not the gains)")
+        raise ConfigError(name, "is not a gain the law holds as a number or a matrix")
     if not (np.all(np.linalg.eigvalsh(np.atleast_2d(attr)) > 0)):
         raise ConfigError(name, f"is not positive definite ({value!r}): only positive gains are tuned")
     lower = upper = None

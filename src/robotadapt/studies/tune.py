@@ -260,6 +260,7 @@ class Search:
     screened: int = 0  # forward runs of the batched screen that chose the start
     began: float = field(default_factory=time.perf_counter)
     last: tuple[Any, float, Array] | None = None  # (θ, μ, ρ, width, scale), value, gradient of the last evaluation
+    converged: bool = False  # the last round ended by L-BFGS-B's own test, not by --max-runs
 
     def fun(self, theta: Array, mu: float, rho: float, width: float) -> tuple[float, Array]:
         """The scaled augmented objective and its gradient at θ (one run per true-parameter set; a switching law's
@@ -383,6 +384,7 @@ def optimise(problem: Problem, max_runs: int, progress: bool = False, screen: in
                                options={"maxfun": max(1, left // (rounds - k) if problem.switching else left),
                                         "gtol": 1e-9, "ftol": FTOL})
                 theta, g = out.x, search.constraint(out.x)
+                search.converged = bool(out.success)
                 met = problem.max_torque is None or (g <= 1e-4 and abs(mu * g) < 1e-4)
                 if met and not problem.switching:
                     break
@@ -390,7 +392,7 @@ def optimise(problem: Problem, max_runs: int, progress: bool = False, screen: in
                     mu, rho = max(0.0, mu + rho * g), rho * (10.0 if g > 0 else 1.0)
                 width /= NARROWING
         except _OutOfRuns:
-            pass
+            search.converged = False
     search.rescore()
     return search
 
@@ -473,7 +475,7 @@ class Tuned:
                             "gradient_norm": it.gradient_norm, "runs": it.runs} for it in self.search.iterations],
             "runs": self.search.runs + self.forward_runs,
             "differentiated_runs": self.search.runs, "forward_runs": self.forward_runs,
-            "screened_runs": self.search.screened,
+            "screened_runs": self.search.screened, "converged": self.search.converged,
             "peak_elasticity": self.peak_elasticity,
             "over": None if self.over is None else {"plant.phi": self.over.tolist(),
                                                     "objective_per_sample": self.after.per_sample},
