@@ -37,5 +37,11 @@ def assert_gradient_is_central_differences(scenario: Scenario, gains: list[Gain]
     theta = problem.theta0
     _, grad, value, *_ = problem.evaluate(theta)
     assert value == pytest.approx(score(scenario, goal, phis).objective, rel=1e-9)
-    fd = central_differences(scenario, gains, goal, theta, phis=phis)
-    assert np.max(np.abs(grad - fd)) <= RELATIVE * np.max(np.abs(fd)), (grad, fd)
+    assert_matches(grad, central_differences(scenario, gains, goal, theta, phis=phis))
+
+
+def assert_matches(grad: np.ndarray, fd: np.ndarray) -> None:
+    """max |∇J − ∇J_FD| ≤ `RELATIVE` max |∇J_FD|; the relative error printed (`pytest -s` shows it: docs/tuning.md)."""
+    error = float(np.max(np.abs(grad - fd)) / np.max(np.abs(fd)))
+    print(f"gradient vs central differences: relative error {error:.2g}")
+    assert error <= RELATIVE, (grad, fd)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -46,6 +46,10 @@ class SignRobust:
     (6.4.4)), the φ̂ the torque uses (Landau's PI law, (6.4.20)), a projection, tables prepared ahead of the run — exists
     on the wrapper exactly when the base has it.
     """
+
+    #: constants tuning leaves alone, with why (robotadapt.studies.gain_space.locate)
+    untuned: ClassVar[dict[str, str]] = {"kd": "is set above the disturbance bound, k_d > sup|T_d| (6.7.8), not tuned "
+                                               "for the error; tune the base law's gains (controller.base.Kv, ...)"}
 
     model: RobotModel
     base: Any

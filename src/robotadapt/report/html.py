@@ -15,8 +15,9 @@ import json
 import time
 import unicodedata
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -434,6 +435,10 @@ the whole simulation (controller, plant and RK4 stages) divided by the number of
     return _page(f"robotadapt: controllers compared on {base.name}", body_html)
 
 
+def _write_text(text: str, f: IO[str]) -> None:
+    f.write(text)
+
+
 def write_comparison(base: Scenario, rows: list[Row], skipped: dict[str, str], out: Path,
                      budget: dict[str, Any] | None = None, output: FigureFormat = PNG) -> Path:
     """Write report.html (self-contained), comparison.json, the overlaid figures errors.png, parameter_errors.png,
@@ -454,10 +459,10 @@ def write_comparison(base: Scenario, rows: list[Row], skipped: dict[str, str], o
     if budget is not None:  # each row's scenario as it ran, tuned: `robotadapt run` reproduces the row
         (out / "tuned").mkdir(exist_ok=True)
         for r in rows:
-            header = (f"# robotadapt compare {base.name} --fair: {r.entry.label}, {budget['objective']} "
-                      f"{r.metrics['objective']:.12g}, max |tau| {r.metrics['peak_torque']:.6g} (budget "
-                      f"{budget['max_torque']:g})\n")
-            atomic_write(out / "tuned" / f"{r.entry.name}.toml", lambda f, r=r, h=header: f.write(h + r.entry.scenario.text))
+            text = (f"# robotadapt compare {base.name} --fair: {r.entry.label}, {budget['objective']} "
+                    f"{r.metrics['objective']:.12g}, max |tau| {r.metrics['peak_torque']:.6g} (budget "
+                    f"{budget['max_torque']:g})\n" + r.entry.scenario.text)
+            atomic_write(out / "tuned" / f"{r.entry.name}.toml", partial(_write_text, text))
             r.metrics["scenario_file"] = f"tuned/{r.entry.name}.toml"
     atomic_write(out / "comparison.json", lambda f: json.dump(
         {"scenario": base.name, "fair": budget, "rows": [r.metrics for r in rows], "skipped": skipped}, f, indent=2))

@@ -177,7 +177,11 @@ def locate(scenario: Scenario, spec: str) -> Gain:
         raise ConfigError("--vary", f"{name!r} is not a gain of the scenario's controller; its keys: {keys}")
     form = _form(value, name)
     ctrl = scenario.setup.controller
-    attr = reduce(lambda obj, key: getattr(obj, key, None), parts[1:], ctrl)
+    owner = reduce(lambda obj, key: getattr(obj, key, None), parts[1:-1], ctrl)
+    why = getattr(type(owner), "untuned", {}).get(parts[-1])  # a law's own reason not to tune a constant
+    if why:
+        raise ConfigError(name, why)
+    attr = getattr(owner, parts[-1], None)
     if not (isinstance(attr, float) or (isinstance(attr, np.ndarray) and attr.ndim == 2)):
         raise ConfigError(name, "is not a gain the law holds as a number or a matrix")
     if not (np.all(np.linalg.eigvalsh(np.atleast_2d(attr)) > 0)):
@@ -212,7 +216,12 @@ def _checked(scenario: Scenario, gain: Gain, value: Any) -> Gain:
         return np.asarray(replace_at(ctrl, gain.path[1:], g).initial_state(s.q0, s.dq0), dtype=float)
 
     base, flat = x0(gain.initial), np.asarray(gain.initial, dtype=float).reshape(-1)
-    columns = [x0(np.reshape(flat + np.eye(flat.size)[k], np.shape(gain.initial))) - base for k in range(flat.size)]
+    def unit(k: int) -> Array:
+        e = np.zeros(flat.size)
+        e[k] = 1.0
+        return e
+
+    columns = [x0(np.reshape(flat + unit(k), np.shape(gain.initial))) - base for k in range(flat.size)]
     jac = np.stack(columns, axis=-1)
     if not np.any(jac):
         return gain
