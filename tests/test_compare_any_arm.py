@@ -236,3 +236,31 @@ def test_the_report_draws_a_run_that_stopped_at_its_first_step(tmp_path):
     write_comparison(base, rows, skipped, tmp_path / "report")
     assert (tmp_path / "report" / "laws.png").stat().st_size > 0
     assert json.loads((tmp_path / "report" / "comparison.json").read_text())["rows"][1]["reference"]
+
+
+def test_the_repetitive_law_does_not_apply_to_a_run_within_one_period():
+    """t_final ≤ T: û_d(t − T) = 0 throughout, nothing is learnt; the lineup skips the law with one line (the Panda's
+    trajectory repeats only after 20π s)."""
+    base = load("example-6.3.1", ["simulation.t_final=6.0"])
+    entries, skipped = lineup(base, None)
+    assert "repetitive" not in [e.name for e in entries]
+    assert skipped["repetitive"].startswith("simulation.t_final: 6 s is within one period T = 6.283 s")
+    entries, skipped = lineup(load("example-6.3.1", ["simulation.t_final=6.5"]), None)
+    assert "repetitive" in [e.name for e in entries] and "repetitive" not in skipped
+
+
+def test_a_tuned_row_over_the_budget_says_why_measured(tmp_path):
+    """A budget below gravity's torque: the row is tuned, stays over, and its note gives the peak after its runs and
+    the gain that moves the peak most, with the elasticity tune.json holds."""
+    out = tmp_path / "fair"
+    with contextlib.redirect_stdout(io.StringIO()):
+        code = main(["compare", "example-6.3.1", "--t-final", "0.3", "--fair", "--max-torque", "1", "--tune-runs", "3",
+                     "--controllers", "slotine_li", "--out", str(out)])
+    assert code == 0
+    (row,) = json.loads((out / "comparison.json").read_text())["rows"]
+    assert row["within_budget"] is False and row["tuned_gains"] is not None
+    match = re.search(r"over the budget after (\d+) runs: max \|τ\| ([\d.]+); the peak moves most with (controller\.\w+) "
+                      r"\(∂ln max\|τ\|/∂ln gain = (-?[\d.e+-]+)\)", row["note"])
+    assert match, row["note"]
+    assert int(match[1]) <= 3 and float(match[2]) == pytest.approx(row["peak_torque"], rel=1e-3)
+    assert match[3] in row["tuned_gains"]

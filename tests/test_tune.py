@@ -280,3 +280,53 @@ def test_gains_the_law_refuses_are_failed_runs_not_written():
     search = Search(problem, 10, None)
     value, grad = search.fun(theta, 0.0, 1.0, 0.1)
     assert value == DIVERGED and not np.any(grad) and search.runs == 0 and not search.evaluated
+
+
+# --------------------------------------------------------------------------------------------------------------------
+# The search (issue 25): forward-mode gradients, the batched screen, the count of runs
+
+
+def test_forward_and_reverse_mode_give_the_same_gradient(monkeypatch):
+    """Few gains take forward mode (jacfwd through the run), many reverse mode (through the checkpointed blocks): the
+    two programs agree to round-off on the same problem."""
+    import robotadapt.studies.tune as tune_module
+
+    scenario, gains = law("slotine_li")
+    goal = parse_objective("rms_error+1e-6*energy")
+    forward = Problem(scenario, gains, goal, 150.0)
+    monkeypatch.setattr(tune_module, "FORWARD_MODE", 0)
+    reverse = Problem(scenario, gains, goal, 150.0)
+    assert forward.forward_mode and not reverse.forward_mode
+    theta = forward.theta0 + 0.1
+    a, b = forward.evaluate(theta, 0.5, 100.0), reverse.evaluate(theta, 0.5, 100.0)
+    assert a[0] == pytest.approx(b[0], rel=1e-12)
+    np.testing.assert_allclose(a[1], b[1], rtol=1e-9, atol=1e-12 * np.max(np.abs(b[1])))
+
+
+def test_the_screen_starts_at_its_best_point_within_the_budget():
+    """The screen's rows: θ₀ clipped into the boxes, then a Latin hypercube filling each box (one point per stratum of
+    every axis); the start it returns is the row of least objective whose exact peak meets the budget, by the forward
+    program scored here by hand on the same rows."""
+    from robotadapt.studies.tune import Search, screen_points
+
+    box = {"controller.Kv": (2.0, 50.0), "controller.Lam": (0.5, 10.0), "controller.Gamma": (0.05, 2.0)}
+    scenario = load("example-6.3.1", ["simulation.t_final=1.0", "simulation.backend='jax'"])
+    problem = Problem(scenario, [locate(scenario, f"{k}={lo}:{hi}") for k, (lo, hi) in box.items()],
+                      parse_objective("rms_error"), 150.0)
+    rows = screen_points(problem, 16)
+    lo, hi = np.log(np.array(list(box.values()))).T
+    np.testing.assert_allclose(rows[0], np.clip(problem.theta0, lo, hi))
+    strata = np.floor((rows[1:] - lo) / (hi - lo) * 15).astype(int)
+    assert all(sorted(strata[:, k]) == list(range(15)) for k in range(3))
+    search = Search(problem, 10, None)
+    start = search.screen(rows)
+    objective, peak = problem.objectives(rows)
+    fits = np.where(peak <= 150.0, objective, np.inf)
+    np.testing.assert_array_equal(start, rows[np.argmin(fits)])
+    assert search.screened == 16 and search.runs == 0 and len(search.evaluated) == 16
+
+
+def test_the_screens_default_is_the_one_the_help_names(capsys):
+    with pytest.raises(SystemExit):
+        main(["tune", "--help"])
+    assert f"(default {SCREEN};" in " ".join(capsys.readouterr().out.split())

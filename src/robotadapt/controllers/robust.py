@@ -48,8 +48,8 @@ class SignRobust:
     """
 
     #: constants tuning leaves alone, with why (robotadapt.studies.gain_space.locate)
-    untuned: ClassVar[dict[str, str]] = {"kd": "is set above the disturbance bound, k_d > sup|T_d| (6.7.8), not tuned "
-                                               "for the error; tune the base law's gains (controller.base.Kv, ...)"}
+    untuned: ClassVar[dict[str, str]] = {"kd": "is set above the disturbance's bound (6.7.8), not tuned for the error; "
+                                               "tune the base law's gains (controller.base.Kv, ...)"}
 
     model: RobotModel
     base: Any

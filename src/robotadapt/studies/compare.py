@@ -349,6 +349,9 @@ def _entry(base: Scenario, name: str, label: str, source: str, section: dict[str
         period = section.get("period", getattr(base.setup.trajectory, "period", None))
         if period is None:
             raise ConfigError("trajectory", "the repetitive law needs a periodic desired trajectory (7.2.30)")
+        if base.setup.t_final <= period:
+            raise ConfigError("simulation.t_final", f"{base.setup.t_final:g} s is within one period T = {period:.4g} s of "
+                              "the trajectory: the repetitive law learns nothing (û_d(t − T) = 0 throughout)")
         integrator = base.setup.integrator
         if isinstance(integrator, SolveIVP):
             sim = data["simulation"]
@@ -453,6 +456,16 @@ def tunable(scenario: Scenario) -> list[str]:
     return found
 
 
+def _over_budget(summary: dict[str, Any]) -> str:
+    """Why a tuned law stays over the budget, measured: its peak after the runs it had, and the gain that moves the peak
+    most (∂ln max|τ|/∂ln gain at the answer); empty within the budget."""
+    if summary["feasible"]:
+        return ""
+    name, value = max(summary["peak_elasticity"].items(), key=lambda kv: abs(kv[1]))
+    return (f"over the budget after {summary['differentiated_runs']} runs: max |τ| {summary['max_abs_torque']:.4g}; the "
+            f"peak moves most with {name} (∂ln max|τ|/∂ln gain = {value:.2g})")
+
+
 def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: float, max_runs: int,
          progress: bool = False) -> tuple[list[Row], dict[str, str]]:
     """The fair comparison: every entry of :func:`lineup` with its own gains tuned (`tunable`) to the same `objective`
@@ -478,10 +491,11 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
             row = _row(replace(entry, note=note), progress)
             row.metrics.update(tuned_gains=None, tune_runs=0, tune_converged=None)
         else:
-            gains = tuned.summary()["gains"]
-            row = _row(replace(entry, scenario=tuned.scenario, source=f"{entry.source}; tuned: {', '.join(fields)}"),
-                       progress)
-            row.metrics.update(tuned_gains=gains, tune_runs=tuned.summary()["runs"], tune_converged=tuned.search.converged)
+            summary = tuned.summary()
+            row = _row(replace(entry, scenario=tuned.scenario, source=f"{entry.source}; tuned: {', '.join(fields)}",
+                               note="; ".join(filter(None, (entry.note, _over_budget(summary))))), progress)
+            row.metrics.update(tuned_gains=summary["gains"], tune_runs=summary["runs"],
+                               tune_converged=tuned.search.converged)
         row.metrics["within_budget"] = row.result.ok and row.metrics["peak_torque"] <= max_torque
         row.metrics["objective"] = goal.of_metrics(metrics(row.result))
         rows.append(row)
