@@ -238,15 +238,18 @@ def test_the_report_draws_a_run_that_stopped_at_its_first_step(tmp_path):
     assert json.loads((tmp_path / "report" / "comparison.json").read_text())["rows"][1]["reference"]
 
 
-def test_the_repetitive_law_does_not_apply_to_a_run_within_one_period():
-    """t_final ≤ T: û_d(t − T) = 0 throughout, nothing is learnt; the lineup skips the law with one line (the Panda's
-    trajectory repeats only after 20π s)."""
-    base = load("example-6.3.1", ["simulation.t_final=6.0"])
-    entries, skipped = lineup(base, None)
-    assert "repetitive" not in [e.name for e in entries]
-    assert skipped["repetitive"].startswith("simulation.t_final: 6 s is within one period T = 6.283 s")
-    entries, skipped = lineup(load("example-6.3.1", ["simulation.t_final=6.5"]), None)
-    assert "repetitive" in [e.name for e in entries] and "repetitive" not in skipped
+def test_a_fair_comparison_does_not_tune_a_learning_law_within_one_period(tmp_path):
+    """t_final ≤ T: û_d(t − T) = 0 throughout, nothing is learnt, so the fair comparison runs the repetitive law with
+    the lineup's gains and says why (the Panda's trajectory repeats only after 20π s)."""
+    out = tmp_path / "fair"
+    with contextlib.redirect_stdout(io.StringIO()):
+        code = main(["compare", "example-6.3.1", "--t-final", "0.5", "--fair", "--max-torque", "150",
+                     "--controllers", "repetitive", "--out", str(out)])
+    assert code == 0
+    (row,) = json.loads((out / "comparison.json").read_text())["rows"]
+    assert row["tuned_gains"] is None and row["tune_runs"] == 0
+    assert ("not tuned (simulation.t_final: 0.5 s is within one period T = 6.283 s: the law learns nothing"
+            in row["note"]), row["note"]
 
 
 def test_a_tuned_row_over_the_budget_says_why_measured(tmp_path):

@@ -44,6 +44,7 @@ import numpy as np
 
 from ..analysis.metrics import metrics
 from ..analysis.monitors import convergence_time
+from ..controllers.base import HasDelayLine
 from ..robots.base import RobotModel
 from ..robots.two_link import TwoLinkArm
 from ..sim.integrators import Sampled, SolveIVP
@@ -349,9 +350,6 @@ def _entry(base: Scenario, name: str, label: str, source: str, section: dict[str
         period = section.get("period", getattr(base.setup.trajectory, "period", None))
         if period is None:
             raise ConfigError("trajectory", "the repetitive law needs a periodic desired trajectory (7.2.30)")
-        if base.setup.t_final <= period:
-            raise ConfigError("simulation.t_final", f"{base.setup.t_final:g} s is within one period T = {period:.4g} s of "
-                              "the trajectory: the repetitive law learns nothing (û_d(t − T) = 0 throughout)")
         integrator = base.setup.integrator
         if isinstance(integrator, SolveIVP):
             sim = data["simulation"]
@@ -481,7 +479,11 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
     rows = []
     for entry in entries:
         try:
-            closed_loop(entry.scenario)
+            loop = closed_loop(entry.scenario)
+            period = getattr(loop.controller, "period", None)  # a learning law's (its delay line's)
+            if isinstance(loop.controller, HasDelayLine) and period is not None and entry.scenario.setup.t_final <= period:
+                raise ConfigError("simulation.t_final", f"{entry.scenario.setup.t_final:g} s is within one period T = "
+                                  f"{period:.4g} s: the law learns nothing (û_d(t − T) = 0 throughout)")
             fields = tunable(entry.scenario)
             if not fields:
                 raise ConfigError("controller", "no gain of this law can be tuned")
