@@ -10,19 +10,9 @@ import pytest
 from robotadapt.cli import main
 from robotadapt.studies.gain_space import draw_over, locate
 from robotadapt.studies.scenarios import load
+from test_kinematic_tree import URDF  # a two-link arm, its first joint of the kind given
 from tuning_checks import assert_gradient_is_central_differences
 
-URDF = """<robot name="two_link">
-  <link name="base"/>
-  <link name="upper"><inertial><origin xyz="0.25 0 0"/><mass value="3.0"/>
-    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.0625" iyz="0" izz="0.0625"/></inertial></link>
-  <link name="fore"><inertial><origin xyz="0.2 0 0"/><mass value="2.0"/>
-    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.0267" iyz="0" izz="0.0267"/></inertial></link>
-  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/><axis xyz="0 0 1"/>
-    <limit lower="-3" upper="3" effort="100" velocity="5"/></joint>
-  <joint name="elbow" type="revolute"><parent link="upper"/><child link="fore"/><origin xyz="0.5 0 0"/>
-    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="100" velocity="5"/></joint>
-</robot>"""
 REST = """[plant]
 q0 = [0.0, 0.0]
 dq0 = [0.0, 0.0]
@@ -45,10 +35,9 @@ GAINS = ("controller.Kv", "controller.Lam", "controller.Gamma")
 
 @pytest.fixture
 def urdf_scenario(tmp_path):
-    (tmp_path / "two_link.urdf").write_text(URDF)
+    (tmp_path / "two_link.urdf").write_text(URDF.format(kind="revolute"))
     path = tmp_path / "urdf-arm.toml"
-    path.write_text(f'[robot]\nkind = "urdf"\npath = "{tmp_path / "two_link.urdf"}"\ngravity = [0.0, -9.81, 0.0]\n'
-                    + REST)
+    path.write_text(f'[robot]\nkind = "urdf"\npath = "{tmp_path / "two_link.urdf"}"\n' + REST)
     return path
 
 
