@@ -86,3 +86,11 @@ def test_a_switching_law_is_tuned_and_scored_on_the_exact_law(tmp_path, capsys):
     scenario = load(name, sets)
     again = score(tuned_scenario(scenario, [locate(scenario, f) for f in fields], theta), parse_objective("rms_error"))
     assert again.objective == pytest.approx(summary["objective"], rel=1e-9)
+
+
+def test_a_surrogate_of_a_surrogate_is_a_surrogate_of_the_law():
+    """Tuning a scenario that already holds a surrogate (a user kind) narrows it again instead of failing."""
+    sign = load(*SIGN[:2]).setup.controller.surrogate(0.05)
+    np.testing.assert_allclose(sign.surrogate(0.01).switching(np.array([0.02])), np.tanh([2.0]), rtol=1e-15)
+    sigma = SwitchingSigma(p=2, Gamma=1.0, phi0=2.0).surrogate(0.1)
+    assert sigma.surrogate(0.01).width == 0.01

@@ -165,7 +165,7 @@ class SwitchingSigma(Gradient):
     def surrogate(self, width: float) -> SmoothedSigma:
         """The smooth law tuning differentiates in place of this one (docs/tuning.md#switching-laws): the ramp's kinks
         and ‖φ̂‖ at 0 rounded over `width`, continued toward the exact law as width → 0."""
-        return SmoothedSigma(**{f.name: getattr(self, f.name) for f in fields(self)}, width=width)
+        return SmoothedSigma(**{f.name: getattr(self, f.name) for f in fields(SwitchingSigma)}, width=width)
 
     def passivity_caveat(self) -> str | None:
         """With S = I, dV_φ/dt = −rᵀZφ̃ + σ_s φ̃ᵀΓ⁻¹φ̂, and φ̃ᵀΓ⁻¹φ̂ ≤ 0 whenever ‖φ̂‖ > ‖φ‖ only for Γ = γI

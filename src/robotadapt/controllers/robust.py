@@ -108,7 +108,7 @@ class SignRobust:
     def surrogate(self, width: float) -> SmoothedSign:
         """The smooth law tuning differentiates in place of this one (docs/tuning.md#switching-laws): sgn(r_i) (or
         sat(r_i/ε)) replaced by tanh(r_i/width), continued toward the exact law as width → 0."""
-        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(SignRobust)}  # a surrogate's own: its law's
         return SmoothedSign(**fields, width=width)
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:

@@ -216,7 +216,8 @@ def _checked(scenario: Scenario, gain: Gain, value: Any) -> Gain:
         return np.asarray(replace_at(ctrl, gain.path[1:], g).initial_state(s.q0, s.dq0), dtype=float)
 
     base, flat = x0(gain.initial), np.asarray(gain.initial, dtype=float).reshape(-1)
-    def unit(k: int) -> Array:
+
+    def unit(k: int) -> Array:  # e_k, one at a time: Γ of the Panda has 4900 entries
         e = np.zeros(flat.size)
         e[k] = 1.0
         return e

@@ -314,11 +314,8 @@ class Search:
         found = [Evaluation(th, float(j), float(p), now) for th, j, p in zip(thetas, objective, peak, strict=True)
                  if np.isfinite(j)]
         self.evaluated.extend(found)
-        budget = self.problem.max_torque
-        fits = [e for e in found if budget is None or e.peak <= budget]
-        if fits:
-            return min(fits, key=lambda e: e.objective).theta
-        return min(found, key=lambda e: e.peak).theta if found else thetas[0]
+        chosen = _chosen(found, self.problem.max_torque)
+        return thetas[0] if chosen is None else chosen.theta
 
     def reached(self, objective: float, budget: float | None) -> Evaluation | None:
         """The first evaluation within the budget whose objective is at most `objective` (benchmarks)."""
@@ -327,10 +324,16 @@ class Search:
 
     def best(self, budget: float | None) -> Array:
         """The evaluated θ of least objective that meets the budget exactly, else the one of least peak torque."""
-        fits = [e for e in self.evaluated if budget is None or e.peak <= budget]
-        if fits:
-            return min(fits, key=lambda e: e.objective).theta
-        return min(self.evaluated, key=lambda e: e.peak).theta if self.evaluated else self.problem.theta0
+        chosen = _chosen(self.evaluated, budget)
+        return self.problem.theta0 if chosen is None else chosen.theta
+
+
+def _chosen(evaluations: list[Evaluation], budget: float | None) -> Evaluation | None:
+    """The evaluation of least objective whose exact peak torque meets the budget, else the one of least peak."""
+    fits = [e for e in evaluations if budget is None or e.peak <= budget]
+    if fits:
+        return min(fits, key=lambda e: e.objective)
+    return min(evaluations, key=lambda e: e.peak) if evaluations else None
 
 
 def screen_points(problem: Problem, count: int, seed: int = 0) -> Array:
