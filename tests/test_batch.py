@@ -48,7 +48,7 @@ def assert_same_run(batch_run, single) -> None:
         m.pop("wall_time_s")
     assert m1.keys() == m2.keys()
     for key, value in m1.items():
-        if value is None or isinstance(value, str | bool | dict) or key == "param_names":
+        if value is None or isinstance(value, str | bool | dict) or key in ("param_names", "consistency_parts"):
             assert value == m2[key], key
         else:
             np.testing.assert_allclose(value, m2[key], rtol=1e-11, atol=1e-12, err_msg=key)

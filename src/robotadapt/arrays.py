@@ -12,7 +12,7 @@ from typing import Any
 import array_api_compat
 import numpy as np
 
-__all__ = ["array_namespace", "matrix", "matvec", "quad", "repeat", "rk4", "solve", "vector"]
+__all__ = ["array_namespace", "expm", "matrix", "matvec", "quad", "repeat", "rk4", "solve", "vector"]
 
 
 def array_namespace(*arrays: Any) -> Any:
@@ -71,6 +71,17 @@ def solve(xp: Any, A: Any, b: Any) -> Any:
         b1, b2 = b[..., 0], b[..., 1]
         return xp.stack([(a22 * b1 - a12 * b2) / det, (a11 * b2 - a21 * b1) / det], axis=-1)
     return xp.linalg.solve(A, b[..., None])[..., 0]
+
+
+def expm(xp: Any, A: Any) -> Any:
+    """The matrix exponential over leading axes, `(..., n, n)`: scipy's for numpy, JAX's (differentiable) else."""
+    if xp is np:
+        import scipy.linalg
+
+        return scipy.linalg.expm(A)
+    import jax.scipy.linalg
+
+    return jax.scipy.linalg.expm(A)
 
 
 UNROLL = 4  # repeat: loops of at most this many bodies are written out in a traced program; longer: a fori_loop

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..arrays import array_namespace
+from ..robots.consistency import consistency_metrics
 
 if TYPE_CHECKING:
     from ..robots.base import RobotModel
@@ -134,7 +135,10 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
     did not finish: its Status as a record, code, t, t_end, reason); `saturated_fraction`
     (:func:`saturated_fraction`, with an actuator) and `max_phi_hat_norm` max ‖φ̂‖ over the run; `final_phi_error`
     ‖φ − φ̂‖ at the end when the truth is known; `lyapunov_max_rel_increase` the largest step increase of V relative to
-    V(0). With the controller's `model`, when its dynamics see fewer combinations than its parameters (an n-DOF arm),
+    V(0); `min_pseudo_inertia_eigenvalue`, `physically_consistent`, `left_consistent_set_t`,
+    `left_consistent_set_part`, `consistency_parts` and `final_min_eigenvalues` of φ̂
+    (:func:`robotadapt.robots.consistency.consistency_metrics`). With the controller's `model`, when its dynamics see
+    fewer combinations than its parameters (an n-DOF arm),
     also the base-parameter keys of :func:`base_metrics`.
     """
     e, t, tau = res.e, res.t, res.tau
@@ -172,6 +176,7 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
         out["phi_true"] = _list(res.phi)
         out["final_phi_error"] = float(np.linalg.norm(res.phi - res.phi_hat[-1]))
     out.update(base_metrics(res, model))
+    out.update(consistency_metrics(t, res.phi_hat, res.param_names))
     if res.V is not None:
         out["V_initial"] = float(res.V[0])
         out["V_final"] = float(res.V[-1])

@@ -64,8 +64,17 @@ def summary(name: str, m: dict[str, Any]) -> str:
     unidentifiable directions, the base-parameter error ‖K φ̃‖/‖K φ‖ and how many directions the dynamics cannot see)."""
     from ..analysis.metrics import health_warnings
 
-    line = _summary(name, m)
+    line = _summary(name, m) + _left(m)
     return "; ".join([line, *(f"warning: {w}" for w in health_warnings(m))])
+
+
+def _left(m: dict[str, Any]) -> str:
+    """Where an arm's link estimates left the physically consistent set (docs/natural.md), when they did."""
+    if m.get("left_consistent_set_t") is None or not any(p.startswith("link") for p in m.get("consistency_parts", ())):
+        return ""
+    return (f", the estimate left the physically consistent set at t = {m['left_consistent_set_t']:.4g} s "
+            f"({m['left_consistent_set_part']}; smallest pseudo-inertia eigenvalue "
+            f"{m['min_pseudo_inertia_eigenvalue']:.3g})")
 
 
 def _summary(name: str, m: dict[str, Any]) -> str:

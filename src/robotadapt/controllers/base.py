@@ -18,14 +18,15 @@ simulator ends the run there and keeps the partial result.
 from __future__ import annotations
 
 from functools import cached_property
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
 from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from ..validation import as_gain, as_vector
+from ..validation import ConfigError, as_gain, as_vector
+from .geometry import Euclidean, Natural, adaptation_gains, geometry
 
 Array = Any
 
@@ -124,6 +125,15 @@ class HasDelayLine(Protocol):
 
 
 @runtime_checkable
+class HasStep(Protocol):
+    """A law whose state lives on a manifold (the natural law's pseudo-inertias): a sampled-data tick moves it by
+    `step` (the exponential map) in place of x + h·dx."""
+
+    def step(self, x: Array, dx: Array, h: Any) -> Array:
+        """x after a step of length h along dx/dt."""
+
+
+@runtime_checkable
 class Prepares(Protocol):
     def prepare(self, trajectory: Any, dt: float, t_final: float) -> Controller:
         """A copy of the controller with tables computed ahead of the run (e.g. Y_d along the desired trajectory)."""
@@ -166,32 +176,50 @@ def gains(obj: Any, names: tuple[str, ...], dim: int) -> None:
 
 def estimate(obj: Any, name: str = "phi_hat0") -> None:
     """Validate a parameter-estimate field against the model's parameter count."""
+    if getattr(obj, name) is None:
+        raise ConfigError(f"controller.{name}", "required: the initial estimate φ̂(0), one value per parameter")
     freeze(obj, **{name: as_vector(getattr(obj, name), obj.model.p, f"controller.{name}", broadcast=False)})
 
 
 class EstimateState:
-    """The state and Γ⁻¹ of a law whose state x is φ̂ itself, adapted with a gain Γ (Slotine–Li, adaptive computed
-    torque, DCAL: Tables 6.3.1, 6.2.1, 7.2.1). A mixin of the laws' dataclasses, which hold `model`, `Gamma` and
-    `phi_hat0`."""
+    """The state of a law that adapts φ̂ with a gain (Slotine–Li, adaptive computed torque, DCAL: Tables 6.3.1, 6.2.1,
+    7.2.1): the book's Euclidean update with Γ (state x = φ̂), or `adaptation = "natural"` with the scalar γ (state:
+    log-Cholesky coordinates of each link's pseudo-inertia, :mod:`robotadapt.controllers.geometry`). A mixin of the
+    laws' dataclasses, which hold `model`, `Gamma`, `phi_hat0`, `adaptation` and `gamma` and call :meth:`adapts` from
+    their `__post_init__`. The law's b (the vector its proof pairs with φ̃) moves the state by `geometry.rate(x, b)`."""
 
     model: RobotModel
     Gamma: Array
     phi_hat0: Array
+    adaptation: str
+    gamma: Any
+    #: the cached constants built from Γ or γ (a tuned gain rebuilds them; studies.gain_space)
+    derived: ClassVar[tuple[str, ...]] = ("geometry",)
+
+    def adapts(self) -> None:
+        """Validate `adaptation`, `Gamma`, `gamma` and `phi_hat0` (physically consistent for the natural law)."""
+        Gamma, gamma = adaptation_gains(self.adaptation, self.Gamma, self.gamma, self.model.param_names)
+        freeze(self, Gamma=Gamma, gamma=gamma)
+        estimate(self)
+        self.geometry.initial_state(self.phi_hat0)
 
     @cached_property
-    def _Gamma_inv(self) -> Array:
-        """Γ⁻¹, for V's parameter term ½ φ̃ᵀ Γ⁻¹ φ̃."""
-        return inverse(self.Gamma)
+    def geometry(self) -> Euclidean | Natural:
+        return geometry(self.adaptation, self.Gamma, self.gamma, self.model.param_names)
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        return tuple(f"{name}_hat" for name in self.model.param_names)
+        return self.geometry.state_names(self.model.param_names)
 
     def initial_state(self, q0: Array, dq0: Array) -> Array:
-        return self.phi_hat0.copy()
+        return self.geometry.initial_state(self.phi_hat0)
 
     def phi_hat(self, x: Array) -> Array:
-        return x
+        return self.geometry.estimate(x)
+
+    def step(self, x: Array, dx: Array, h: Any) -> Array:
+        """x after a control period h along dx/dt (HasStep): the exponential map of the natural law."""
+        return self.geometry.step(x, dx, h)
 
 
 def inverse(A: Array) -> Array:

@@ -21,7 +21,7 @@ from ..arrays import array_namespace, matvec, quad, solve
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_vector
-from .base import Array, EstimateState, errors, estimate, freeze, gains, positive_definite
+from .base import Array, EstimateState, errors, freeze, gains, positive_definite
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,6 +46,9 @@ class AdaptiveComputedTorque(EstimateState):
         Adaptation gain Γ, symmetric positive definite.
     phi_hat0 : (p,) array
         Initial estimate φ̂(0).
+    adaptation, gamma : "euclidean" (Γ, the book's) or "natural" with the scalar γ > 0
+        The natural law: the same b = Wᵀ M̂⁻¹ E1 moves each link's pseudo-inertia by dĴ/dt = Ĵ B Ĵ / γ, and V's
+        parameter term is 2γ Σ D(Jᵢ‖Ĵᵢ) (docs/natural.md); no box.
     Q, P : (2n, 2n) array, optional
         The Lyapunov pair of (6.2.16); give at most one. From `Q`, P solves AᵀP + PA = −Q; a given `P` must make
         Q = −(AᵀP + PA) positive definite. With neither, scalar gains K_p = k_p I, K_v = k_v I take the book's
@@ -62,19 +65,23 @@ class AdaptiveComputedTorque(EstimateState):
     model: RobotModel
     Kp: Any
     Kv: Any
-    Gamma: Any
-    phi_hat0: Any
+    Gamma: Any = None
+    phi_hat0: Any = None
     Q: Any = None
     P: Any = None
     phi_min: Any = None
     phi_max: Any = None
+    adaptation: str = "euclidean"
+    gamma: Any = None
     book_pair: ClassVar[bool]  # per instance, not a field: set by __post_init__ (a copy keeps it)
 
     def __post_init__(self) -> None:
         n, p = self.model.n, self.model.p
         gains(self, ("Kp", "Kv"), n)
-        gains(self, ("Gamma",), p)
-        estimate(self)
+        self.adapts()
+        if self.adaptation == "natural" and (self.phi_min is not None or self.phi_max is not None):
+            raise ConfigError("controller.phi_min", "the natural law keeps φ̂ a real body itself; remove the box "
+                              "phi_min/phi_max, or use adaptation = \"euclidean\"")
         if self.P is not None and self.Q is not None:
             raise ConfigError("controller.P", "give either P or Q (P is then solved from AᵀP + PA = −Q), not both")
         given = {k: getattr(self, k) for k in ("P", "Q", "phi_min", "phi_max") if getattr(self, k) is not None}
@@ -131,7 +138,7 @@ class AdaptiveComputedTorque(EstimateState):
         return lo, hi
 
     #: the cached constants computed from K_p, K_v, Q by traceable arithmetic (a tuned gain recomputes them)
-    derived: ClassVar[tuple[str, ...]] = ("lyapunov_pair", "_BtP")
+    derived: ClassVar[tuple[str, ...]] = ("lyapunov_pair", "_BtP", "geometry")
 
     @cached_property
     def _BtP(self) -> Array:
@@ -139,12 +146,14 @@ class AdaptiveComputedTorque(EstimateState):
         return self.lyapunov_pair[0][self.model.n :, :]
 
     def phi_hat(self, x: Array) -> Array:
-        """φ̂: the state clipped into the box (the state itself without bounds)."""
+        """φ̂: the state clipped into the box (the state itself without bounds); the natural law's estimate."""
+        if self.adaptation == "natural":
+            return self.geometry.estimate(x)
         return array_namespace(x).clip(x, *self.bounds)
 
     def project(self, x: Array) -> Array:
-        """Clip the state into the box after each fixed step."""
-        return self.phi_hat(x)
+        """Clip the state into the box after each fixed step (the natural law's state needs none)."""
+        return x if self.adaptation == "natural" else self.phi_hat(x)
 
     def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         """E1 = Bᵀ P [e; ė] = P12ᵀ e + P22 ė (6.2.19); ½ e + ė with the book's P."""
@@ -168,9 +177,10 @@ class AdaptiveComputedTorque(EstimateState):
         ok = positive_definite(xp, M_hat)
         M_hat = xp.where(ok[..., None, None], M_hat, xp.eye(self.model.n))  # solve would raise on a singular M̂
         W = self.model.regressor(q, dq, dq, ddq)
-        dx = matvec(W.mT, solve(xp, M_hat, self.filtered_error(t, x, q, dq, ref))) @ self.Gamma.T
-        lo, hi = self.bounds
-        dx = xp.where(((x <= lo) & (dx < 0)) | ((x >= hi) & (dx > 0)), 0.0, dx)
+        dx = self.geometry.rate(x, matvec(W.mT, solve(xp, M_hat, self.filtered_error(t, x, q, dq, ref))))
+        if self.adaptation == "euclidean":
+            lo, hi = self.bounds
+            dx = xp.where(((x <= lo) & (dx < 0)) | ((x >= hi) & (dx > 0)), 0.0, dx)
         return xp.where(ok[..., None], dx, xp.nan)
 
     def stop_reason(self, q: Array, x: Array) -> str:
@@ -179,10 +189,11 @@ class AdaptiveComputedTorque(EstimateState):
         return _not_pd(self.model.mass_matrix(np.asarray(q), phi_hat), phi_hat)
 
     def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
-        """V = xᵀ P x + φ̃ᵀ Γ⁻¹ φ̃ (6.2.11) with x = [e; ė] and the true φ."""
+        """V = xᵀ P x + φ̃ᵀ Γ⁻¹ φ̃ (6.2.11) with x = [e; ė] and the true φ; twice the geometry's parameter term, so the
+        natural law's is 2γ Σ D(Jᵢ‖Ĵᵢ)."""
         P = self.lyapunov_pair[0]
         e = array_namespace(q).concatenate(errors(q, dq, ref), axis=-1)
-        return quad(e, P) + quad(phi - self.phi_hat(x), self._Gamma_inv)
+        return quad(e, P) + 2 * self.geometry.lyapunov(self.phi_hat(x) if self.adaptation == "euclidean" else x, phi)
 
 
 def _check_pd(S: Array, field: str, what: str) -> None:

@@ -7,11 +7,11 @@ from typing import Any
 
 import numpy as np
 
-from ..arrays import array_namespace, matvec, quad
+from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from ..validation import ConfigError, as_gain, as_scalar
-from .base import Array, EstimateState, errors, estimate
+from ..validation import ConfigError, as_scalar
+from .base import Array, EstimateState, errors
 
 _MAX_TABLE_BYTES = 2e9
 
@@ -47,25 +47,27 @@ class DCAL(EstimateState):
 
     Y_d depends only on the desired trajectory, so with `precompute = true` it is tabulated before the run on the
     simulation grid and read, not evaluated, on line (the point of §7.2). V is non-increasing when the gain conditions
-    (7.2.22), (7.2.25), (7.2.26) hold. `k_v, k_p, k_a` are scalars, as in the book's analysis.
+    (7.2.22), (7.2.25), (7.2.26) hold. `k_v, k_p, k_a` are scalars, as in the book's analysis. `adaptation = "natural"`
+    with `gamma`: the natural law on b = Y_dᵀ r, its divergence in V (docs/natural.md).
     """
 
     model: RobotModel
     Kv: Any
     Kp: Any
     Ka: Any
-    Gamma: Any
-    phi_hat0: Any
+    Gamma: Any = None
+    phi_hat0: Any = None
     precompute: bool = False
     table: DesiredRegressorTable | None = field(default=None, metadata={"internal": True})
+    adaptation: str = "euclidean"
+    gamma: Any = None
 
     def __post_init__(self) -> None:
         for name in ("Kv", "Kp", "Ka"):
             object.__setattr__(self, name, as_scalar(getattr(self, name), f"controller.{name}", positive=True))
-        object.__setattr__(self, "Gamma", as_gain(self.Gamma, self.model.p, "controller.Gamma"))
         if not isinstance(self.precompute, bool):
             raise ConfigError("controller.precompute", f"expected true or false, got {self.precompute!r}")
-        estimate(self)
+        self.adapts()
 
     def prepare(self, trajectory: Any, dt: float, t_final: float) -> DCAL:
         """With `precompute`, tabulate Y_d at every RK4 stage instant of the run (half steps up to t_final)."""
@@ -98,13 +100,13 @@ class DCAL(EstimateState):
         e, de = errors(q, dq, ref)
         r = de + e
         Yd = self.desired_regressor(t, ref)
-        tau = matvec(Yd, x) + (self.Kv + self.Ka * (e * e).sum(axis=-1, keepdims=True)) * r + self.Kp * e
-        return tau, matvec(Yd.mT, r) @ self.Gamma.T
+        tau = matvec(Yd, self.phi_hat(x)) + (self.Kv + self.Ka * (e * e).sum(axis=-1, keepdims=True)) * r + self.Kp * e
+        return tau, self.geometry.rate(x, matvec(Yd.mT, r))
 
     def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
         """V of (7.2.14) with the true φ."""
         e, de = errors(q, dq, ref)
         r = de + e
         M = self.model.mass_matrix(q, phi)
-        return 0.5 * (r * matvec(M, r)).sum(axis=-1) + 0.5 * self.Kp * (e * e).sum(axis=-1) + 0.5 * quad(
-            phi - x, self._Gamma_inv)
+        return 0.5 * (r * matvec(M, r)).sum(axis=-1) + 0.5 * self.Kp * (e * e).sum(axis=-1) + self.geometry.lyapunov(
+            x, phi)

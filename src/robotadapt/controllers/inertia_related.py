@@ -5,10 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..arrays import matvec, quad
+from ..arrays import matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from .base import Array, EstimateState, errors, estimate, gains, slotine_li_regressor
+from .base import Array, EstimateState, errors, gains, slotine_li_regressor
 
 
 @dataclass(frozen=True, eq=False)
@@ -21,19 +21,21 @@ class InertiaRelated(EstimateState):
     V = ½ rᵀ M(q) r + ½ φ̃ᵀ Γ⁻¹ φ̃,  dV/dt = −rᵀ K_v r  (6.3.7), (6.3.17)
 
     No joint acceleration and no inverse of M̂ are needed. State x = φ̂. Gains: a scalar (k·I), a list (diagonal) or a
-    symmetric positive definite matrix.
+    symmetric positive definite matrix. With `adaptation = "natural"` and the scalar `gamma`, the update is the natural
+    adaptive law dĴᵢ/dt = Ĵᵢ Bᵢ Ĵᵢ / γ on b = Yᵀr and V's parameter term γ Σ D(Jᵢ‖Ĵᵢ) (docs/natural.md): the same dV/dt.
     """
 
     model: RobotModel
     Lam: Any
     Kv: Any
-    Gamma: Any
-    phi_hat0: Any
+    Gamma: Any = None
+    phi_hat0: Any = None
+    adaptation: str = "euclidean"
+    gamma: Any = None
 
     def __post_init__(self) -> None:
         gains(self, ("Lam", "Kv"), self.model.n)
-        gains(self, ("Gamma",), self.model.p)
-        estimate(self)
+        self.adapts()
 
     def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         e, de = errors(q, dq, ref)
@@ -45,12 +47,11 @@ class InertiaRelated(EstimateState):
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         Y, r = self.regressor(t, x, q, dq, ref)
-        tau = matvec(Y, x) + matvec(self.Kv, r)
-        dx = matvec(self.Gamma, matvec(Y.mT, r))
-        return tau, dx
+        tau = matvec(Y, self.phi_hat(x)) + matvec(self.Kv, r)
+        return tau, self.geometry.rate(x, matvec(Y.mT, r))
 
     def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
-        """V of (6.3.7) with the true φ."""
+        """V of (6.3.7) with the true φ (its parameter term the geometry's)."""
         r = self.filtered_error(t, x, q, dq, ref)
         M = self.model.mass_matrix(q, phi)
-        return 0.5 * (r * matvec(M, r)).sum(axis=-1) + 0.5 * quad(phi - x, self._Gamma_inv)
+        return 0.5 * (r * matvec(M, r)).sum(axis=-1) + self.geometry.lyapunov(x, phi)

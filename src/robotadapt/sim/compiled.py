@@ -100,7 +100,8 @@ def rebuild(obj: Any, leaves: Iterator[Array]) -> Any:
             object.__setattr__(new, k, rebuild(v, leaves))
         return new
     if isinstance(obj, tuple | list):
-        return type(obj)(rebuild(v, leaves) for v in obj)
+        items = [rebuild(v, leaves) for v in obj]
+        return type(obj)(*items) if hasattr(obj, "_fields") else type(obj)(items)  # a NamedTuple takes its fields
     return obj
 
 

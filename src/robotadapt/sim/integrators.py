@@ -109,7 +109,8 @@ class Sampled:
 
     `discretization` is the rule advancing the controller's state x between ticks, from the samples y_k at t_k:
 
-    - ``"euler"``: x_{k+1} = x_k + Ts·f(t_k, x_k, y_k), forward Euler, what `x += Ts * dx` in a control loop does;
+    - ``"euler"``: x_{k+1} = x_k + Ts·f(t_k, x_k, y_k), forward Euler, what `x += Ts * dx` in a control loop does (a
+      law on a manifold, HasStep: its exponential map along f, the natural law);
     - ``"hold"``: x_{k+1} = x(t_k + Ts) of dx/dt = f(t_k, x, y_k) with t, y and the reference held at their samples,
       integrated by RK4 on the plant's sub-steps: the zero-order-hold equivalent (exact for the linear filters of the
       passivity servo and the composite law, up to RK4's error; the same as Euler when f does not depend on x, as for

@@ -19,7 +19,8 @@ draws them from the run's seed ahead, a block of ticks at a time, for both drive
 5. the record of the tick: the true state s_k, x_k, u_k, τ_k, q_m, q̇_m (the drivers keep every `log_every`-th);
 6. the plant: `substeps` RK4 steps of dt = Ts/substeps of ds/dt = f(t, s, u_k) (a MuJoCo plant: `substeps` steps of
    MuJoCo's own integrator, :meth:`robotadapt.plant.mujoco.MujocoPlant.advance`); the controller's state: x_{k+1} by the
-   discrete rule ("euler" or "hold"), projected (a guard failing inside "hold" stops the run at t_k, this tick logged);
+   discrete rule ("euler", the exponential map of a law on a manifold, or "hold"), projected (a guard failing
+   inside "hold" stops the run at t_k, this tick logged);
 7. the divergence guard on (s_{k+1}, x_{k+1}): the run stops at t_k + Ts on a non-finite state or one beyond
    `max_state` (:class:`Verdict`, codes of :data:`robotadapt.sim.loop.REASONS` and `GUARD`).
 
@@ -36,7 +37,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from ..arrays import array_namespace, repeat, rk4
-from ..controllers.base import FiltersTorque, HasProjection
+from ..controllers.base import FiltersTorque, HasProjection, HasStep
 from ..plant.actuators import Actuator
 from ..plant.sensors import Sensor
 from ..trajectories import Reference
@@ -125,10 +126,12 @@ class Tick:
     max_state: float
     has_line: bool
     projects: bool = field(init=False)
+    steps: bool = field(init=False)  # a law on a manifold: "euler" takes its exponential map (HasStep)
     filters: bool = field(init=False)  # the law filters the torque (FiltersTorque): it is given the held u_k
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "projects", isinstance(self.loop.controller, HasProjection))
+        object.__setattr__(self, "steps", isinstance(self.loop.controller, HasStep))
         object.__setattr__(self, "filters", isinstance(self.loop.controller, FiltersTorque))
 
     def start(self, z0: Array, line: Array | None = None) -> Carry:
@@ -231,7 +234,8 @@ class Tick:
         whether its guard held in every stage and the first stage state where it did not (None otherwise)."""
         opts, ctrl, q, dq, ddq = self.opts, self.loop.controller, sample.q_m, sample.dq_m, sample.ddq_m
         if opts.discretization == "euler":
-            return self.project(x + opts.control_period * sample.dx), None, None
+            h = opts.control_period
+            return self.project(ctrl.step(x, sample.dx, h) if self.steps else x + h * sample.dx), None, None
 
         def rate(_t: Any, y: Array) -> Array:
             if self.loop.needs_acceleration:
