@@ -246,7 +246,7 @@ def test_a_hundred_thousand_ticks_at_an_aggressive_gamma_stay_real_bodies_and_th
 
 @pytest.mark.parametrize("gains, field, words", [
     ('adaptation = "natural"\ngamma = -1.0', "controller.gamma", ["positive"]),
-    ('adaptation = "natural"\ngamma = 1.0\nGamma = 2.0', "controller.Gamma", ["gamma"]),
+    ('adaptation = "natural"\ngamma = 0.0', "controller.gamma", ["positive"]),
     ('adaptation = "natural"', "controller.gamma", ["required"]),
     ('adaptation = "riemann"\ngamma = 1.0', "controller.adaptation", ["natural"]),
 ])
@@ -256,6 +256,14 @@ def test_bad_natural_input_is_one_line_and_exit_2(tmp_path, capsys, gains, field
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and field in err and all(w in err for w in words), err
     assert not (tmp_path / "out").exists()
+
+
+def test_set_switches_a_packaged_scenario_to_the_natural_law_its_gamma_unused(tmp_path):
+    """`robotadapt run panda-slotine-li --set controller.adaptation="natural" --set controller.gamma=1.0`: the file's Γ
+    is the Euclidean law's and goes unused."""
+    scenario = load("panda-slotine-li", ['controller.adaptation="natural"', "controller.gamma=1.0"])
+    ctrl = scenario.setup.controller
+    assert ctrl.Gamma is None and ctrl.gamma == 1.0 and type(ctrl.geometry).__name__ == "Natural"
 
 
 def test_an_inconsistent_start_and_a_model_without_pseudo_inertias_are_refused(capsys, tmp_path):

@@ -187,13 +187,12 @@ class Natural:
 
 def adaptation_gains(adaptation: Any, Gamma: Any, gamma: Any, param_names: tuple[str, ...]) -> tuple[Any, Any]:
     """(Γ, γ) of a law's `adaptation`, `Gamma` and `gamma` fields, validated: Γ for "euclidean", γ > 0 for "natural" on
-    a model whose every parameter has a physical form (a link's pseudo-inertia or a positive scalar)."""
+    a model whose every parameter has a physical form (a link's pseudo-inertia or a positive scalar). Under "natural" a
+    scenario's Γ is the Euclidean law's and goes unused (None), so that `--set controller.adaptation="natural" --set
+    controller.gamma=…` switches a packaged scenario (and "none" ignores both)."""
     if adaptation not in ADAPTATIONS:
         raise ConfigError("controller.adaptation", f"expected one of {', '.join(ADAPTATIONS)}, got {adaptation!r}")
-    if adaptation == "none":
-        if Gamma is not None or gamma is not None:
-            raise ConfigError("controller.Gamma" if Gamma is not None else "controller.gamma", "adaptation = \"none\" "
-                              "keeps φ̂(0): remove the adaptation gain")
+    if adaptation == "none":  # φ̂(0) held: a scenario's gains go unused
         return None, None
     if adaptation == "euclidean":
         if Gamma is None:
@@ -203,9 +202,6 @@ def adaptation_gains(adaptation: Any, Gamma: Any, gamma: Any, param_names: tuple
             raise ConfigError("controller.gamma", "is the natural law's gain: set adaptation = \"natural\", or give Γ "
                               "as controller.Gamma")
         return as_gain(Gamma, len(param_names), "controller.Gamma"), None
-    if Gamma is not None:
-        raise ConfigError("controller.Gamma", "adaptation = \"natural\" has one scalar gain, controller.gamma; remove "
-                          "Gamma")
     if gamma is None:
         raise ConfigError("controller.gamma", "required with adaptation = \"natural\": a positive scalar (larger is "
                           "slower adaptation: dĴ/dt = Ĵ B Ĵ / γ)")
