@@ -131,6 +131,25 @@ def _term_table(value: Any, k: int, n: int, field: str, per_frequency: bool) -> 
     return arr.T.copy()
 
 
+def fourier(n: int, period: Any, a: Any, b: Any, offset: Any = 0.0) -> SumOfSines:
+    """The finite Fourier series of exciting trajectories (Swevers et al. 1997), per joint i:
+
+    q_i(t) = offset_i + Σ_{l=1..K} a_il/(ω_f l) sin(ω_f l t) − b_il/(ω_f l) cos(ω_f l t),   ω_f = 2π/period,
+
+    so q̇_i = Σ a_il cos(ω_f l t) + b_il sin(ω_f l t). `a`, `b`: tables `[joint][harmonic]` of n rows of K (rad/s), or a
+    list of K shared by every joint. Each harmonic is the sinusoid √(a² + b²)/(ω_f l) · sin(ω_f l t + atan2(−b, a)).
+    """
+    T = as_scalar(period, "trajectory.period", positive=True)
+    tables = [as_array(v, f"trajectory.{name}") for name, v in (("a", a), ("b", b))]
+    if tables[0].ndim not in (1, 2) or tables[0].shape[-1] == 0:
+        raise ConfigError("trajectory.a", f"expected a list of K harmonics or a table of {n} rows of K, got {a!r}")
+    k = tables[0].shape[-1]
+    A, B = (_term_table(v, k, n, f"trajectory.{name}", True) for name, v in (("a", tables[0]), ("b", tables[1])))
+    w = 2 * np.pi / T * np.arange(1, k + 1)
+    return SumOfSines(np.hypot(A, B) / w[:, None], np.repeat(w[:, None], n, axis=1), np.arctan2(-B, A),
+                      as_vector(offset, n, "trajectory.offset"))
+
+
 def sinusoid(n: int, amplitude: Any = 1.0, omega: Any = 1.0, phase: Any = 0.0, offset: Any = 0.0) -> SumOfSines:
     """q_des,i = offset_i + A_i sin(ω_i t + φ_i), per joint (the book's `sin t` is the default)."""
     def row(value: Any, name: str) -> Array:

@@ -45,6 +45,7 @@ REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
     "trajectory": {
         "sinusoid": ("trajectories:sinusoid", "n"),
         "sum_of_sines": ("trajectories:sum_of_sines", "n"),
+        "fourier": ("trajectories:fourier", "n"),
         "exponential_step": ("trajectories:exponential_step", "n"),
         "quintic": ("trajectories:quintic", "n"),
         "constant": ("trajectories:constant", "n"),
