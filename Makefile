@@ -19,7 +19,7 @@ $(VENV)/.core: $(BIN)/python pyproject.toml
 	touch $@
 
 $(VENV)/.dev: $(BIN)/python pyproject.toml
-	$(PIP) install --quiet -e ".[dev,symbolic,urdf,dist,jax,mujoco]"
+	$(PIP) install --quiet -e ".[dev,symbolic,urdf,dist,jax,mujoco,identify]"
 	touch $@
 
 demo: $(VENV)/.core                ## set up and run the flagship example (Example 6.3.1) into results/

@@ -187,8 +187,8 @@ class KinematicTree(SerialChain, RobotModel):
     `translation` (n, 3) the joint frame in the parent link's frame at q = 0, `axis` (n, 3) unit, in the joint frame,
     `link_rotation`, `link_translation` the link frame in the joint frame; `g` the gravity vector (m/s², base axes);
     `link_params` (n, 10) the standard parameters `default_phi` starts with; `rotor_inertia`, `viscous`, `coulomb`
-    (n,) or None: the column groups present and their default values; `joint_names`, `q_limits` (n, 2), `name`
-    informative. Build one with :meth:`from_urdf`, :meth:`example`, :meth:`from_pinocchio`, :meth:`from_dh` or
+    (n,) or None: the column groups present and their default values; `joint_names`, `q_limits` (n, 2), `dq_limits` and
+    `tau_limits` (n,) (a URDF's `<limit velocity effort>`), `name` informative (exciting trajectories respect them). Build one with :meth:`from_urdf`, :meth:`example`, :meth:`from_pinocchio`, :meth:`from_dh` or
     :meth:`from_symbolic`; `dataclasses.replace` makes variants.
     """
 
@@ -206,6 +206,8 @@ class KinematicTree(SerialChain, RobotModel):
     coulomb: Any = None
     joint_names: tuple[str, ...] = ()
     q_limits: Any = None
+    dq_limits: Any = None
+    tau_limits: Any = None
     name: str = "chain"
     _const: dict[str, Array] = field(init=False, repr=False)
     _chain: bool = field(init=False, repr=False)
@@ -242,6 +244,9 @@ class KinematicTree(SerialChain, RobotModel):
             if limits.shape != (n, 2) or np.any(np.isnan(limits)) or np.any(limits[:, 0] >= limits[:, 1]):
                 raise ConfigError("robot.q_limits", f"expected {n} rows [lower, upper] with lower < upper")
             set_(self, "q_limits", limits)
+        for name in ("dq_limits", "tau_limits"):
+            if getattr(self, name) is not None:
+                set_(self, name, as_vector(getattr(self, name), n, f"robot.{name}", positive=True, broadcast=False))
         names = tuple(str(x) for x in self.joint_names) or tuple(f"joint{i + 1}" for i in range(n))
         if len(names) != n:
             raise ConfigError("robot.joint_names", f"expected {n} names, got {len(names)}")
@@ -290,6 +295,9 @@ class KinematicTree(SerialChain, RobotModel):
         limits = np.array([[model.lowerPositionLimit[model.idx_qs[j]], model.upperPositionLimit[model.idx_qs[j]]]
                            if model.joints[j].nq == 1 else [-np.inf, np.inf] for j in joints])
         q_limits = limits if np.all(limits[:, 0] < limits[:, 1]) else None
+        rates = {name: values if np.all(np.isfinite(values) & (values > 0)) else None for name, values in
+                 (("dq_limits", np.array([model.velocityLimit[model.idx_vs[j]] for j in joints])),
+                  ("tau_limits", np.array([model.effortLimit[model.idx_vs[j]] for j in joints])))}
         placements = [model.jointPlacements[j] for j in joints]
         n = len(kinds)
         extras = {"rotor_inertia": model.armature, "viscous": model.damping, "coulomb": model.friction}
@@ -298,7 +306,7 @@ class KinematicTree(SerialChain, RobotModel):
                    np.array(axes), np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3)), np.array(model.gravity.linear),
                    np.array([model.inertias[j].toDynamicParameters() for j in joints]),
                    **{k: np.array(v, dtype=float) if flags[k] else None for k, v in extras.items()},
-                   joint_names=tuple(model.names[1:]), q_limits=q_limits, name=name)
+                   joint_names=tuple(model.names[1:]), q_limits=q_limits, name=name, **rates)
 
     @classmethod
     def from_urdf(cls, path: str | PathLike[str], locked: Sequence[str] = (), rotor_inertia: bool = False,
