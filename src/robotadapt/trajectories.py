@@ -28,7 +28,8 @@ class Reference(NamedTuple):
 class Trajectory(Protocol):
     """A desired trajectory of `n` joints."""
 
-    n: int
+    @property
+    def n(self) -> int: ...
 
     def __call__(self, t: Array) -> Reference:
         """(q_d, q̇_d, q̈_d) at `t` (a scalar or an array of instants), each of shape `t.shape + (n,)`."""

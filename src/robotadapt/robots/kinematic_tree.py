@@ -188,8 +188,9 @@ class KinematicTree(SerialChain, RobotModel):
     `link_rotation`, `link_translation` the link frame in the joint frame; `g` the gravity vector (m/s², base axes);
     `link_params` (n, 10) the standard parameters `default_phi` starts with; `rotor_inertia`, `viscous`, `coulomb`
     (n,) or None: the column groups present and their default values; `joint_names`, `q_limits` (n, 2), `dq_limits` and
-    `tau_limits` (n,) (a URDF's `<limit velocity effort>`), `name` informative (exciting trajectories respect them). Build one with :meth:`from_urdf`, :meth:`example`, :meth:`from_pinocchio`, :meth:`from_dh` or
-    :meth:`from_symbolic`; `dataclasses.replace` makes variants.
+    `tau_limits` (n,) (a URDF's `<limit velocity effort>`), `name` informative (exciting trajectories respect them).
+    Build one with :meth:`from_urdf`, :meth:`example`, :meth:`from_pinocchio`, :meth:`from_dh` or :meth:`from_symbolic`;
+    `dataclasses.replace` makes variants.
     """
 
     joints: str

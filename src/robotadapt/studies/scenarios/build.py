@@ -507,6 +507,7 @@ def _truth_tables(section: Any, the_plant: Plant, model: RobotModel, name: str =
 
     - `phi_hat0 = {scale = s}`: s × the true value of each of the controller's parameters, e.g. 0.7 for an estimate
       30 % low on all of them (n-DOF arms, whose φ has tens of entries);
+    - `phi_hat0 = {file = "DIR/identified.json"}`: the estimate `robotadapt identify` wrote (:func:`identified`);
     - `Gamma = {scale = s, eps = ε}`: the diagonal Γ_k = s (|φ_k| + ε), an adaptation gain scaled to each parameter's
       size (a uniform Γ adapts parameters of very different sizes at very different relative rates).
 
@@ -517,6 +518,8 @@ def _truth_tables(section: Any, the_plant: Plant, model: RobotModel, name: str =
     section = dict(section)
     for key in NESTED.keys() & section.keys():  # the law a passivity-based one uses, the one a robust one wraps
         section[key] = _truth_tables(section[key], the_plant, model, f"{name}.{key}")
+    if isinstance(section.get("phi_hat0"), dict) and "file" in section["phi_hat0"]:
+        section["phi_hat0"] = identified(section["phi_hat0"], model, f"{name}.phi_hat0")
     for key, allowed in (("phi_hat0", ["scale"]), ("Gamma", ["scale", "eps"])):
         value = section.get(key)
         if not isinstance(value, dict):
@@ -536,6 +539,29 @@ def _truth_tables(section: Any, the_plant: Plant, model: RobotModel, name: str =
             eps = as_scalar(value.get("eps", EPS), f"{where}.eps", nonnegative=True)
             section[key] = (scale * (np.abs(phi) + eps)).tolist()  # a list gain is the diagonal
     return section
+
+
+def identified(value: dict[str, Any], model: RobotModel, where: str) -> list[float]:
+    """φ̂(0) from an `identified.json` of `robotadapt identify` (docs/identification.md): its `phi` (the estimate it
+    chose, standard parameters) or, for a base-parameter controller, its `base` values, matched to the controller's
+    parameters by name."""
+    check_names(list(value), ["file"], where, required=["file"])
+    path = Path(str(value["file"]))
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        pairs = [*zip(data["param_names"], data["phi"], strict=True),
+                 *zip(data["base_names"], data["base"][data["estimate"]], strict=True)]
+    except FileNotFoundError:
+        raise ConfigError(f"{where}.file", f"no such file: {str(path)!r} (write it with `robotadapt identify`)") from None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(f"{where}.file", f"{str(path)!r} is not an identified.json of `robotadapt identify` "
+                          f"({type(exc).__name__}: {exc})") from None
+    values = dict(pairs)
+    missing = [p for p in model.param_names if p not in values]
+    if missing:
+        raise ConfigError(f"{where}.file", f"{str(path)!r} has no value for the controller's parameter"
+                          f"{'s' * (len(missing) > 1)} {', '.join(missing[:4])}: identify with this scenario's robot")
+    return [float(values[p]) for p in model.param_names]
 
 
 def setup(data: dict[str, Any]) -> Setup:

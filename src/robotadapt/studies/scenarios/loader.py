@@ -112,11 +112,13 @@ def parse(text: str, origin: str) -> dict[str, Any]:
 
 
 def _files_relative_to(data: dict[str, Any], folder: Path) -> dict[str, Any]:
-    """A relative `path` of a robot (a URDF file) in a scenario file is relative to that file's folder."""
-    plant = data.get("plant")
-    for section in (data.get("robot"), plant.get("robot") if isinstance(plant, dict) else None):
-        if isinstance(section, dict) and isinstance(section.get("path"), str) and not Path(section["path"]).is_absolute():
-            section["path"] = str(folder / section["path"])
+    """A relative `path` of a robot (a URDF file) and a relative `phi_hat0 = {file = …}` in a scenario file are
+    relative to that file's folder."""
+    plant, controller = data.get("plant"), data.get("controller")
+    for section, key in ((data.get("robot"), "path"), (plant.get("robot") if isinstance(plant, dict) else None, "path"),
+                         (controller.get("phi_hat0") if isinstance(controller, dict) else None, "file")):
+        if isinstance(section, dict) and isinstance(section.get(key), str) and not Path(section[key]).is_absolute():
+            section[key] = str(folder / section[key])
     return data
 
 

@@ -1,0 +1,377 @@
+"""An optimised exciting trajectory for identification (`robotadapt excite`, docs/identification.md).
+
+The trajectory is the finite Fourier series of Swevers, Ganseman, Tükel, De Schutter & Van Brussel, "Optimal robot
+excitation and identification", IEEE TRA 13(5), 1997 (:func:`robotadapt.trajectories.fourier`), per joint i:
+
+    q_i(t) = q_i0 + Σ_{l=1..K} a_il/(ω_f l) sin(ω_f l t) − b_il/(ω_f l) cos(ω_f l t),   ω_f = 2π/T.
+
+It starts (and, being periodic, ends) at rest by construction: q̇_i(0) = Σ_l a_il = 0 and q̈_i(0) = ω_f Σ_l l b_il = 0
+are solved for a_iK and b_iK, so the design vector x holds a_il, b_il for l < K and q_i0, n(2K − 1) numbers.
+
+Objective, on N samples t_j = j T/N of one period: the stacked base regressor W = [Y_b(q_d, q̇_d, q̇_d, q̈_d)(t_j)]
+((N n) × b, SI units; :mod:`robotadapt.robots.identifiability`) and its singular values σ (of W itself, not of WᵀW,
+which would square the condition number):
+
+- `cond` (default): minimise log cond W = log σ_max − log σ_min. The least-squares estimate's relative error is
+  bounded by cond W times the relative torque noise, and the identification papers (Gautier & Khalil 1992, Swevers
+  et al. 1997) report cond W; it depends on the units and on the choice of base parameters.
+- `logdet`: maximise log det WᵀW = 2 Σ log σ (D-optimality), invariant to the parameters' units and to the choice of
+  base parameters up to a constant, but it may buy a large det with one weak direction left.
+
+Constraints, on the same samples, each normalised to ≤ 1: the position inside [lower, upper], |q̇| ≤ q̇_max,
+|q̈| ≤ q̈_max and |τ| ≤ τ_max, τ the inverse dynamics at the model's nominal parameters (`default_phi`, the prior a user
+has), each sample and joint a row (the first three are linear in x). SLSQP minimises with the JAX gradient and
+Jacobian (compiled once, shared by the `starts` random feasible starts: random coefficients scaled by bisection to
+`START_SHARE` of the largest feasible size, about the middle of the position range). The best feasible result is then
+checked on a grid `FINE` times denser; where it leaves a limit between the samples its coefficients are scaled down
+(q − q_0, q̇ and q̈ scale with them) by bisection until the fine grid is inside, and what is reported is what the fine
+grid shows.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..robots.base import RobotModel
+from ..robots.identifiability import base_parameters
+from ..sim.compiled import float64, jax_module
+from ..trajectories import SumOfSines, Trajectory, fourier
+from ..validation import ConfigError
+
+Array = Any
+KINDS = ("position", "velocity", "acceleration", "torque")
+OBJECTIVES = ("cond", "logdet")
+SAMPLES_PER_HARMONIC = 20  # default N: this many samples per period of the highest harmonic ...
+ROWS_PER_PARAMETER = 4  # ... and at least this many equations per base parameter
+FINE = 20  # the check's grid is this many times denser
+START_SHARE = 0.7  # a start is this share of the largest feasible scaling of its random coefficients
+MAXITER = 300
+FTOL = 1e-10
+FEASIBLE = 1e-6  # a sampled constraint counts as met up to this (normalised) violation
+
+
+@dataclass(frozen=True, eq=False)
+class Limits:
+    """The bounds the design keeps, `fraction` of the given limits applied: `lower`, `upper` (n,) the position range
+    (shrunk about its middle), `velocity`, `acceleration`, `torque` (n,) (inf: not constrained). `given` holds the limits
+    before the fraction (position as (n, 2)), `source` per kind and joint "urdf", "model", "option" or "none"."""
+
+    lower: Array
+    upper: Array
+    velocity: Array
+    acceleration: Array
+    torque: Array
+    given: dict[str, Array | None]
+    source: dict[str, tuple[str, ...]]
+    fraction: float
+
+    def bound(self, kind: str) -> Array:
+        """The (n,) bound of a magnitude kind."""
+        return {"velocity": self.velocity, "acceleration": self.acceleration, "torque": self.torque}[kind]
+
+    def as_dict(self) -> dict[str, Any]:
+        position = {"lower": self.lower.tolist(), "upper": self.upper.tolist(), "given": _listed(self.given["position"]),
+                    "source": list(self.source["position"])}
+        out: dict[str, Any] = {"fraction": self.fraction, "position": position}
+        for kind in KINDS[1:]:
+            out[kind] = {"bound": _listed(self.bound(kind)), "given": _listed(self.given[kind]),
+                         "source": list(self.source[kind])}
+        return out
+
+
+def _listed(values: Array | None) -> Any:
+    """An array as JSON: inf (no limit) as None."""
+    if values is None:
+        return None
+    return [_listed(v) if np.ndim(v) else (float(v) if np.isfinite(v) else None) for v in values]
+
+
+def resolve_limits(model: RobotModel, given: dict[str, Array | None], fraction: float = 0.9,
+                   model_source: str = "model") -> Limits:
+    """The bounds of the design: each kind from `given` (position (n, 2), the others (n,)) where not None, else from
+    the model's `q_limits`, `dq_limits`, `tau_limits` (labelled `model_source`), else none; position limits are
+    required. `fraction` (0, 1] shrinks every limit toward safety."""
+    if not 0 < fraction <= 1:
+        raise ConfigError("--fraction", f"expected a number in (0, 1], got {fraction:g}")
+    n = model.n
+    own = {"position": getattr(model, "q_limits", None), "velocity": getattr(model, "dq_limits", None),
+           "acceleration": None, "torque": getattr(model, "tau_limits", None)}
+    values, source = {}, {}
+    for kind in KINDS:
+        value, label = (given.get(kind), "option") if given.get(kind) is not None else (own[kind], model_source)
+        values[kind] = None if value is None else np.asarray(value, dtype=float)
+        source[kind] = (label if value is not None else "none",) * n
+    if values["position"] is None:
+        raise ConfigError("--position-limit", "the model has no joint limits: give --position-limit X (|q| ≤ X rad) or "
+                          "LO:HI per joint, comma-separated")
+    if values["torque"] is not None and model.default_phi is None:
+        raise ConfigError("--torque-limit", "the model has no nominal parameters (default_phi) to compute τ with")
+    mid, half = values["position"].mean(axis=1), 0.5 * np.diff(values["position"], axis=1)[:, 0]
+    bounds = {kind: np.full(n, np.inf) if (v := values[kind]) is None else fraction * v for kind in KINDS[1:]}
+    return Limits(mid - fraction * half, mid + fraction * half, bounds["velocity"], bounds["acceleration"],
+                  bounds["torque"], values, source, float(fraction))
+
+
+@dataclass(frozen=True, eq=False)
+class Design:
+    """The parametrisation of the module docstring: `n` joints, `harmonics` K ≥ 2, `period` T (s)."""
+
+    n: int
+    harmonics: int
+    period: float
+
+    def __post_init__(self) -> None:
+        K = self.harmonics
+        if isinstance(K, bool) or not float(K).is_integer() or K < 2:
+            raise ConfigError("--harmonics", f"expected a whole number ≥ 2 (with one harmonic, starting at rest leaves "
+                              f"no motion), got {K!r}")
+        if not np.isfinite(self.period) or not self.period > 0:
+            raise ConfigError("--period", f"must be a positive number of seconds, got {self.period!r}")
+        object.__setattr__(self, "harmonics", int(K))
+
+    @property
+    def size(self) -> int:
+        """The length n(2K − 1) of the design vector."""
+        return self.n * (2 * self.harmonics - 1)
+
+    @property
+    def omega(self) -> Array:
+        """ω_f l, l = 1..K (rad/s)."""
+        return 2 * np.pi / self.period * np.arange(1, self.harmonics + 1)
+
+    def coefficients(self, x: Array, xp: Any = np) -> tuple[Array, Array, Array]:
+        """(a, b, q_0): the tables (n, K) with a_iK = −Σ_{l<K} a_il and b_iK = −Σ_{l<K} l b_il / K, and (n,)."""
+        n, K = self.n, self.harmonics
+        m = n * (K - 1)
+        a, b = xp.reshape(x[:m], (n, K - 1)), xp.reshape(x[m : 2 * m], (n, K - 1))
+        l = np.arange(1, K)
+        a = xp.concat([a, -xp.sum(a, axis=1, keepdims=True)], axis=1)
+        b = xp.concat([b, -(b @ l)[:, None] / K], axis=1)
+        return a, b, x[2 * m :]
+
+    def vector(self, a: Array, b: Array, offset: Array) -> Array:
+        """The design vector of coefficients (the last harmonic dropped: it follows from the others)."""
+        return np.concat([np.asarray(a)[:, :-1].ravel(), np.asarray(b)[:, :-1].ravel(), np.asarray(offset)])
+
+    def motion(self, x: Array, t: Array, xp: Any = np) -> tuple[Array, Array, Array]:
+        """(q_d, q̇_d, q̈_d) at the instants `t` (m,), each (m, n): the series above, linear in x."""
+        a, b, offset = self.coefficients(x, xp)
+        w = self.omega
+        S, C = np.sin(np.outer(t, w)), np.cos(np.outer(t, w))
+        return (offset + S @ (a / w).T - C @ (b / w).T, C @ a.T + S @ b.T, C @ (b * w).T - S @ (a * w).T)
+
+    def trajectory(self, x: Array) -> SumOfSines:
+        """The trajectory of `x`, as a scenario's `[trajectory] kind = "fourier"` builds it."""
+        a, b, offset = self.coefficients(np.asarray(x, dtype=float))
+        return fourier(self.n, self.period, a, b, offset)
+
+    def grid(self, samples: int) -> Array:
+        """`samples` instants j T / samples of one period."""
+        return self.period * np.arange(samples) / samples
+
+
+def stacked_regressor(model: RobotModel, independent: Array, q: Array, dq: Array, ddq: Array) -> Array:
+    """W = [Y_b(q_d, q̇_d, q̇_d, q̈_d)] over the samples, shape (m n, b)."""
+    Y = model.regressor(q, dq, dq, ddq)[..., independent]
+    return Y.reshape(-1, len(independent))
+
+
+def spectrum_scores(W: Array, xp: Any = np) -> tuple[Array, Array]:
+    """(log cond W, log det WᵀW) from the singular values of W."""
+    s = xp.linalg.svd(W, compute_uv=False)
+    return xp.log(s[0]) - xp.log(s[-1]), 2 * xp.sum(xp.log(s))
+
+
+@dataclass(frozen=True, eq=False)
+class Envelope:
+    """A trajectory on a grid `t` with the inverse dynamics at the nominal φ (`tau`, None without one), the extremes
+    per joint and kind, and how far each kind goes toward its bound: `ratio[kind]` = max over joints and instants of
+    |value|/bound (position: |q − middle|/half range); ≤ 1 meets it (NaN: not constrained)."""
+
+    t: Array
+    q: Array
+    dq: Array
+    ddq: Array
+    tau: Array | None
+    ratio: dict[str, float]
+
+    @property
+    def met(self) -> bool:
+        return all(not r > 1.0 for r in self.ratio.values())
+
+    def as_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"position": {"min": self.q.min(axis=0).tolist(), "max": self.q.max(axis=0).tolist()}}
+        for kind, v in (("velocity", self.dq), ("acceleration", self.ddq), ("torque", self.tau)):
+            out[kind] = None if v is None else np.abs(v).max(axis=0).tolist()
+        return {"max_abs": out, "worst_ratio": {k: None if np.isnan(r) else r for k, r in self.ratio.items()},
+                "limits_met": self.met}
+
+
+def envelope(model: RobotModel, trajectory: Trajectory, t: Array, limits: Limits) -> Envelope:
+    """The trajectory's :class:`Envelope` on `t`, by numpy (the trajectory object and the model's inverse dynamics)."""
+    ref = trajectory(np.asarray(t, dtype=float))
+    phi = model.default_phi
+    tau = None if phi is None else np.asarray(model.inverse_dynamics(ref.q_des, ref.dq_des, ref.ddq_des, phi))
+    mid, half = 0.5 * (limits.upper + limits.lower), 0.5 * (limits.upper - limits.lower)
+    ratio = {"position": float(np.max(np.abs(ref.q_des - mid) / half))}
+    for kind, v in (("velocity", ref.dq_des), ("acceleration", ref.ddq_des), ("torque", tau)):
+        bound = limits.bound(kind)
+        ratio[kind] = float(np.max(np.abs(v) / bound)) if v is not None and np.all(np.isfinite(bound)) else np.nan
+    return Envelope(np.asarray(t), ref.q_des, ref.dq_des, ref.ddq_des, tau, ratio)
+
+
+def score(model: RobotModel, independent: Array, trajectory: Trajectory, t: Array) -> tuple[float, float]:
+    """(cond W, log det WᵀW) of a trajectory on the instants `t`, by numpy."""
+    ref = trajectory(np.asarray(t, dtype=float))
+    log_cond, log_det = spectrum_scores(stacked_regressor(model, independent, ref.q_des, ref.dq_des, ref.ddq_des))
+    return float(np.exp(log_cond)), float(log_det)
+
+
+class Programs:
+    """The compiled objective (value and gradient) and constraints (values ≥ 0 and Jacobian) of one design, shared by
+    every start. Call within :func:`~robotadapt.sim.compiled.float64`."""
+
+    def __init__(self, model: RobotModel, design: Design, independent: Array, limits: Limits, t: Array,
+                 objective: str) -> None:
+        jax = jax_module()
+        jnp = jax.numpy
+        phi = model.default_phi
+        mid, half = 0.5 * (limits.upper + limits.lower), 0.5 * (limits.upper - limits.lower)
+        kinds = [k for k in KINDS[1:] if np.all(np.isfinite(limits.bound(k)))]
+
+        def value(x: Array) -> Array:
+            log_cond, log_det = spectrum_scores(stacked_regressor(model, independent, *design.motion(x, t, jnp)), jnp)
+            return log_cond if objective == "cond" else -log_det
+
+        def constraints(x: Array) -> Array:
+            q, dq, ddq = design.motion(x, t, jnp)
+            values = {"velocity": dq, "acceleration": ddq}
+            if "torque" in kinds:
+                values["torque"] = model.inverse_dynamics(q, dq, ddq, phi)
+            rows = [(q - mid) / half] + [values[k] / limits.bound(k) for k in kinds]
+            return 1.0 - jnp.concat([jnp.ravel(r) for r in rows] + [-jnp.ravel(r) for r in rows])
+
+        self.value_and_grad = jax.jit(jax.value_and_grad(value))
+        self.constraints = jax.jit(constraints)
+        self.jacobian = jax.jit(jax.jacfwd(constraints))
+
+    def objective(self, x: Array) -> tuple[float, Array]:
+        f, g = self.value_and_grad(x)
+        return float(f), np.asarray(g)
+
+    def feasible(self, x: Array) -> bool:
+        return bool(np.min(np.asarray(self.constraints(x))) >= -FEASIBLE)
+
+
+def _largest_scale(feasible: Any, hi: float = 1.0, steps: int = 40) -> float:
+    """The largest s in [0, ∞) with `feasible(s)` by doubling then bisection (0 when s = 0 is not feasible)."""
+    if not feasible(0.0):
+        return 0.0
+    while feasible(hi) and hi < 1e6:
+        hi *= 2
+    lo = 0.0
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if feasible(mid) else (lo, mid)
+    return lo
+
+
+def _scaled(design: Design, x: Array, s: float) -> Array:
+    """x with every coefficient a_il, b_il times s (the offsets kept)."""
+    m = design.n * (design.harmonics - 1)
+    return np.concat([s * x[: 2 * m], x[2 * m :]])
+
+
+def _start(design: Design, programs: Programs, limits: Limits, rng: np.random.Generator) -> Array:
+    """A random feasible start: coefficients ~ N(0, 1/l) about the middle of the position range, scaled."""
+    n, K = design.n, design.harmonics
+    spread = 1.0 / np.arange(1, K)
+    x = np.concat([(rng.standard_normal((n, K - 1)) * spread).ravel(), (rng.standard_normal((n, K - 1)) * spread).ravel(),
+                   0.5 * (limits.lower + limits.upper)])
+    s = _largest_scale(lambda s: programs.feasible(_scaled(design, x, s)))
+    return _scaled(design, x, START_SHARE * s)
+
+
+@dataclass(frozen=True, eq=False)
+class Excitation:
+    """The optimised trajectory (`x`, `design`; :meth:`trajectory`) with its scores on the `samples` grid (`cond`,
+    `log_det`), its `fine` :class:`Envelope` (what `limits` it meets), `scale` the factor the coefficients were scaled
+    down by to meet them between the samples (1: not needed), the optimiser's `iterations` and final objective per
+    start, and `seconds` taken."""
+
+    design: Design
+    x: Array
+    objective: str
+    samples: int
+    cond: float
+    log_det: float
+    limits: Limits
+    fine: Envelope
+    scale: float
+    iterations: tuple[int, ...]
+    start_objectives: tuple[float, ...]
+    seconds: float
+
+    def trajectory(self) -> SumOfSines:
+        return self.design.trajectory(self.x)
+
+    def as_dict(self) -> dict[str, Any]:
+        a, b, offset = self.design.coefficients(self.x)
+        return {"objective": self.objective, "harmonics": self.design.harmonics, "period": self.design.period,
+                "samples": self.samples, "a": a.tolist(), "b": b.tolist(), "offset": offset.tolist(),
+                "q0": self.trajectory()(0.0).q_des.tolist(), "cond": self.cond, "log_det": self.log_det,
+                **self.fine.as_dict(), "fine_samples": int(self.fine.t.size), "scale": self.scale,
+                "iterations": list(self.iterations), "start_objectives": list(self.start_objectives),
+                "seconds": self.seconds}
+
+
+def default_samples(design: Design, base_count: int) -> int:
+    """N: `SAMPLES_PER_HARMONIC` per period of the highest harmonic, at least `ROWS_PER_PARAMETER` rows per base
+    parameter."""
+    return max(SAMPLES_PER_HARMONIC * design.harmonics, -(-ROWS_PER_PARAMETER * base_count // design.n))
+
+
+@float64
+def excite(model: RobotModel, design: Design, limits: Limits, objective: str = "cond", samples: int | None = None,
+           starts: int = 3, rng: np.random.Generator | None = None) -> Excitation:
+    """The exciting trajectory of the module docstring for `model`: `starts` SLSQP runs from random feasible starts
+    drawn from `rng` (default seed 0), the best kept, checked and scaled on the fine grid."""
+    import scipy.optimize
+
+    clock = time.perf_counter()
+    if objective not in OBJECTIVES:
+        raise ConfigError("--objective", f"expected one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    if isinstance(starts, bool) or not isinstance(starts, int) or starts < 1:
+        raise ConfigError("--starts", f"expected a whole number ≥ 1, got {starts!r}")
+    independent = np.array(base_parameters(model).independent)
+    b = independent.size
+    samples = default_samples(design, b) if samples is None else samples
+    if isinstance(samples, bool) or not isinstance(samples, int) or samples * design.n < b:
+        raise ConfigError("--samples", f"expected a whole number with samples × {design.n} joints ≥ the {b} base "
+                          f"parameters (at least {-(-b // design.n)}), got {samples!r}")
+    rng = np.random.default_rng(0) if rng is None else rng
+    programs = Programs(model, design, independent, limits, design.grid(samples), objective)
+    bounds = {"type": "ineq", "fun": lambda x: np.asarray(programs.constraints(x)),
+              "jac": lambda x: np.asarray(programs.jacobian(x))}
+    runs = []
+    for _ in range(starts):
+        res = scipy.optimize.minimize(programs.objective, _start(design, programs, limits, rng), jac=True,
+                                      method="SLSQP", constraints=[bounds], options={"maxiter": MAXITER, "ftol": FTOL})
+        runs.append((not programs.feasible(res.x), float(res.fun), int(res.nit), res.x))
+    infeasible, _, _, x = min(runs, key=lambda r: (r[0], r[1]))
+    fine_t = design.grid(FINE * samples)
+    fine = envelope(model, design.trajectory(x), fine_t, limits)
+    scale = 1.0
+    if not fine.met:
+        scale = _largest_scale(lambda s: s <= 1 and envelope(model, design.trajectory(_scaled(design, x, s)), fine_t,
+                                                               limits).met, hi=1.0)
+        if scale > 0:
+            x = _scaled(design, x, scale)
+            fine = envelope(model, design.trajectory(x), fine_t, limits)
+    cond, log_det = score(model, independent, design.trajectory(x), design.grid(samples))
+    return Excitation(design, x, objective, samples, cond, log_det, limits, fine, scale, tuple(r[2] for r in runs),
+                      tuple(r[1] for r in runs), time.perf_counter() - clock)
