@@ -19,7 +19,6 @@ from robotadapt.robots.consistency import parts, smallest_eigenvalues
 from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import fourier
 
-RNG = np.random.default_rng(27)
 
 
 @pytest.fixture(scope="module")
@@ -28,19 +27,21 @@ def panda():
 
 
 def exciting(n: int, period: float = 4.0) -> object:
-    """A Fourier trajectory of 4 harmonics with random coefficients about the Panda's ready pose."""
-    a, b = RNG.uniform(-0.4, 0.4, (2, n, 4))
+    """A Fourier trajectory of 4 harmonics with random coefficients (one fixed draw) about the Panda's ready pose."""
+    a, b = np.random.default_rng(27).uniform(-0.4, 0.4, (2, n, 4))
     return fourier(n, period, a, b, [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785][:n])
 
 
-def inverse_dynamics_data(setup, T: float = 8.0, dt: float = 2e-3, noise: float = 0.0, phi=None) -> JointData:
-    """q, q̇ of an exciting trajectory and τ = Y φ (+ noise), as a log would hold them."""
+def inverse_dynamics_data(setup, T: float = 8.0, dt: float = 2e-3, noise: float = 0.0, phi=None,
+                          seed: int = 0) -> JointData:
+    """q, q̇ of an exciting trajectory and τ = Y φ (+ noise of standard deviation `noise`, drawn with `seed`), as a log
+    would hold them."""
     model = setup.controller.model
     t = np.arange(0.0, T, dt)
     ref = exciting(model.n)(t)
     phi = setup.plant.phi if phi is None else phi
     tau = np.asarray(model.regressor(ref.q_des, ref.dq_des, ref.dq_des, ref.ddq_des)) @ phi
-    tau = tau + noise * RNG.standard_normal(tau.shape)
+    tau = tau + noise * np.random.default_rng(seed).standard_normal(tau.shape)
     return JointData(t, ref.q_des, ref.dq_des, tau, "test")
 
 
@@ -51,7 +52,7 @@ def base_error(estimate, basis, phi) -> float:
 def test_savitzky_golay_derivatives_are_exact_on_a_polynomial_of_their_order():
     """q(t) a degree-6 polynomial per joint: q̇ and q̈ from q alone equal the written-out derivatives."""
     t = np.linspace(0.0, 1.0, 201)
-    c = RNG.normal(size=(7, 2))
+    c = np.random.default_rng(1).normal(size=(7, 2))
     q = sum(c[k] * t[:, None] ** k for k in range(7))
     dq = sum(k * c[k] * t[:, None] ** (k - 1) for k in range(1, 7))
     ddq = sum(k * (k - 1) * c[k] * t[:, None] ** (k - 2) for k in range(2, 7))
@@ -111,7 +112,8 @@ def test_the_covariance_is_honest_under_torque_noise(panda):
     model, phi = panda.controller.model, panda.plant.phi
     errors = []
     for noise in (0.01, 0.1):
-        res = identify(model, inverse_dynamics_data(panda, noise=noise), Preprocessing(), consistent=False)
+        res = identify(model, inverse_dynamics_data(panda, noise=noise, seed=int(1000 * noise)), Preprocessing(),
+                       consistent=False)
         z = (res.base["wls"] - res.basis.K @ phi) / np.sqrt(np.diag(res.covariance))
         assert np.max(np.abs(z)) < 5.0
         assert 0.3 < np.mean(z**2) < 3.0
@@ -220,7 +222,7 @@ def test_the_identified_urdf_reads_back_as_the_parameters_written(tmp_path, pand
     from robotadapt.validation import ConfigError
 
     path, locked = example_urdf("panda")
-    rows = KinematicTree.from_urdf(path, locked).link_params * RNG.uniform(0.8, 1.2, (7, 1))
+    rows = KinematicTree.from_urdf(path, locked).link_params * np.random.default_rng(2).uniform(0.8, 1.2, (7, 1))
     c = np.array([0.0, 0.0, 0.1])  # the point mass: m, m c, m(‖c‖²𝟙 − c cᵀ) in Ixx, Ixy, Iyy, Ixz, Iyz, Izz order
     rows[6] += 1.5 * np.array([1.0, *c, c[2] ** 2, 0.0, c[2] ** 2, 0.0, 0.0, 0.0])
     out = tmp_path / "identified.urdf"
