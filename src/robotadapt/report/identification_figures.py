@@ -1,17 +1,23 @@
-"""The figure of `robotadapt identify`: held-out torque, measured against each estimate's prediction
-(docs/identification.md)."""
+"""The figures of identification (docs/identification.md): `robotadapt excite`'s trajectory against its limits and its
+regressor's singular values, and `robotadapt identify`'s held-out torque against each estimate's prediction."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from ..analysis.identification import Identification  # noqa: E402
+from ..robots.base import RobotModel  # noqa: E402
+from ..robots.identifiability import base_parameters  # noqa: E402
+from ..studies.excite import Excitation, stacked_regressor  # noqa: E402
+from ..trajectories import Trajectory  # noqa: E402
 from .output import PNG, FigureFormat, save_figure  # noqa: E402
 
 STYLES = {"consistent": "-", "wls": "--", "ols": ":", "prior": "-."}
@@ -45,3 +51,55 @@ def holdout_plot(result: Identification, title: str = "") -> Figure:
 def holdout_figure(result: Identification, path: Path, title: str = "", output: FigureFormat = PNG) -> Path:
     """:func:`holdout_plot` written to `path` in `output`'s format."""
     return save_figure(holdout_plot(result, title), path, output)
+
+
+def excitation_plot(model: RobotModel, result: Excitation, old: Trajectory, compared: dict[str, Any],
+                    title: str = "") -> Figure:
+    """Over one period on the check's fine grid: each joint's position, velocity, acceleration and torque (at the
+    nominal φ) as a share of its bound (±1 dashed; a kind without bounds is drawn in its own units), and the singular
+    values of the stacked base regressor W of `model` on the optimised trajectory against the scenario's own (`old`, on
+    the grid of `compared`, :func:`~robotadapt.studies.excite.before`'s record)."""
+    fine, limits = result.fine, result.limits
+    mid, half = 0.5 * (limits.upper + limits.lower), 0.5 * (limits.upper - limits.lower)
+    rows = [("position", (fine.q - mid) / half, "$(q - q_{mid})/$half range")]
+    for kind, value, symbol in (("velocity", fine.dq, r"\dot q"), ("acceleration", fine.ddq, r"\ddot q"),
+                                ("torque", fine.tau, r"\tau")):
+        if value is None:
+            continue
+        bound = limits.bound(kind)
+        bounded = bool(np.all(np.isfinite(bound)))
+        rows.append((kind, value / bound if bounded else value, f"${symbol}$" + (" / bound" if bounded else "")))
+    fig, axes = plt.subplots(len(rows) + 1, 1, figsize=(8, 1.9 * len(rows) + 2.6))
+    for ax, (kind, value, label) in zip(axes, rows, strict=False):
+        for i in range(value.shape[1]):
+            ax.plot(fine.t, value[:, i], linewidth=1.0, label=f"joint {i + 1}")
+        if kind == "position" or np.all(np.isfinite(limits.bound(kind))):
+            for y in (-1.0, 1.0):
+                ax.axhline(y, color="k", linestyle="--", linewidth=0.8)
+        ax.set_ylabel(label)
+        ax.set_title(f"{kind}: largest share of its bound {fine.ratio[kind]:.3g}" if not np.isnan(fine.ratio[kind])
+                     else f"{kind} (no bound)", fontsize="small")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize="x-small", ncol=min(result.design.n, 4))
+    axes[len(rows) - 1].set_xlabel("time $t$ (s), one period")
+    independent = np.array(base_parameters(model).independent)
+    new_ref = result.trajectory()(result.design.grid(result.samples))
+    old_ref = old(compared["horizon"] * np.arange(compared["samples"]) / compared["samples"])
+    ax = axes[-1]
+    for name, ref, style in (("optimised", new_ref, "o-"), ("scenario's own", old_ref, "s--")):
+        W = stacked_regressor(model, independent, ref.q_des, ref.dq_des, ref.ddq_des)
+        sv = np.linalg.svd(W / np.sqrt(len(ref.q_des)), compute_uv=False)
+        ax.semilogy(np.arange(1, sv.size + 1), sv, style, markersize=3, label=f"{name}: cond W = {sv[0] / sv[-1]:.4g}")
+    ax.set_xlabel("index of the singular value")
+    ax.set_ylabel(r"$\sigma_k(W)/\sqrt{N}$")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize="small")
+    fig.suptitle(f"{title}: exciting trajectory ({result.objective} objective)".lstrip(": "))
+    fig.tight_layout()
+    return fig
+
+
+def excitation_figure(model: RobotModel, result: Excitation, old: Trajectory, compared: dict[str, Any], path: Path,
+                      title: str = "", output: FigureFormat = PNG) -> Path:
+    """:func:`excitation_plot` written to `path` in `output`'s format."""
+    return save_figure(excitation_plot(model, result, old, compared, title), path, output)

@@ -300,8 +300,8 @@ def _start(design: Design, programs: Programs, limits: Limits, rng: np.random.Ge
 class Excitation:
     """The optimised trajectory (`x`, `design`; :meth:`trajectory`) with its scores on the `samples` grid (`cond`,
     `log_det`), its `fine` :class:`Envelope` (what `limits` it meets), `scale` the factor the coefficients were scaled
-    down by to meet them between the samples (1: not needed), the optimiser's `iterations` and final objective per
-    start, and `seconds` taken."""
+    down by to meet them between the samples (1: not needed), per start the optimiser's `iterations` and its objective
+    at the start and at the end, and `seconds` taken."""
 
     design: Design
     x: Array
@@ -314,6 +314,7 @@ class Excitation:
     scale: float
     iterations: tuple[int, ...]
     start_objectives: tuple[float, ...]
+    final_objectives: tuple[float, ...]
     seconds: float
 
     def trajectory(self) -> SumOfSines:
@@ -326,6 +327,7 @@ class Excitation:
                 "q0": self.trajectory()(0.0).q_des.tolist(), "cond": self.cond, "log_det": self.log_det,
                 **self.fine.as_dict(), "fine_samples": int(self.fine.t.size), "scale": self.scale,
                 "iterations": list(self.iterations), "start_objectives": list(self.start_objectives),
+                "final_objectives": list(self.final_objectives),
                 "seconds": self.seconds}
 
 
@@ -359,10 +361,11 @@ def excite(model: RobotModel, design: Design, limits: Limits, objective: str = "
               "jac": lambda x: np.asarray(programs.jacobian(x))}
     runs = []
     for _ in range(starts):
-        res = scipy.optimize.minimize(programs.objective, _start(design, programs, limits, rng), jac=True,
-                                      method="SLSQP", constraints=[bounds], options={"maxiter": MAXITER, "ftol": FTOL})
-        runs.append((not programs.feasible(res.x), float(res.fun), int(res.nit), res.x))
-    infeasible, _, _, x = min(runs, key=lambda r: (r[0], r[1]))
+        x0 = _start(design, programs, limits, rng)
+        res = scipy.optimize.minimize(programs.objective, x0, jac=True, method="SLSQP", constraints=[bounds],
+                                      options={"maxiter": MAXITER, "ftol": FTOL})
+        runs.append((not programs.feasible(res.x), float(res.fun), int(res.nit), res.x, programs.objective(x0)[0]))
+    x = min(runs, key=lambda r: (r[0], r[1]))[3]  # feasible first, then the lowest objective
     fine_t = design.grid(FINE * samples)
     fine = envelope(model, design.trajectory(x), fine_t, limits)
     scale = 1.0
@@ -374,4 +377,19 @@ def excite(model: RobotModel, design: Design, limits: Limits, objective: str = "
             fine = envelope(model, design.trajectory(x), fine_t, limits)
     cond, log_det = score(model, independent, design.trajectory(x), design.grid(samples))
     return Excitation(design, x, objective, samples, cond, log_det, limits, fine, scale, tuple(r[2] for r in runs),
-                      tuple(r[1] for r in runs), time.perf_counter() - clock)
+                      tuple(r[4] for r in runs), tuple(r[1] for r in runs), time.perf_counter() - clock)
+
+
+def before(model: RobotModel, trajectory: Trajectory, t_final: float, design: Design, samples: int,
+           limits: Limits) -> dict[str, Any]:
+    """A trajectory to compare with the design's (a scenario's own), scored the same way: cond W and log det WᵀW over
+    its `horizon` (its period, else `t_final`) at the design's density of `samples` per period, and its
+    :class:`Envelope` against the same `limits` on a grid `FINE` times denser."""
+    period = getattr(trajectory, "period", None)
+    horizon = float(period) if period else float(t_final)
+    count = max(samples, int(round(samples * horizon / design.period)))
+    grid = horizon * np.arange(count) / count
+    cond, log_det = score(model, np.array(base_parameters(model).independent), trajectory, grid)
+    fine = envelope(model, trajectory, horizon * np.arange(FINE * count) / (FINE * count), limits)
+    return {"cond": cond, "log_det": log_det, "horizon": horizon, "samples": count, **fine.as_dict()}
+
