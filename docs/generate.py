@@ -108,7 +108,19 @@ def cli_page() -> str:
     return "\n".join(out).replace("usage: __main__.py", "usage: robotadapt") + "\n"
 
 
-AUDIT = [  # (what is wrong, command-line arguments; FILE is a scenario file written with the given text)
+def _log(joints: int, rows: int, header: str = "", nan_at: int = -1, back_at: int = -1, motion: float = 0.1) -> str:
+    """The text of a CSV log of `rows` samples every 10 ms: t, q1…, tau1… of `joints` joints (or `header`), each
+    `motion` · k · t, a NaN in q1 at row `nan_at`, time stepping back at row `back_at`."""
+    names = header or ",".join(["t", *(f"q{i}" for i in range(1, joints + 1)), *(f"tau{i}" for i in range(1, joints + 1))])
+    lines = [names]
+    for k in range(rows):
+        t = 0.01 * (k - 2 * (k == back_at))
+        values = [t, *(float("nan") if k == nan_at and i == 0 else motion * (i + 1) * t for i in range(2 * joints))]
+        lines.append(",".join(f"{v:g}" for v in values[: len(names.split(","))]))
+    return "\n".join(lines) + "\n"
+
+
+AUDIT = [  # (what is wrong, command-line arguments; FILE is a scenario file, CSV a log, written with the given text)
     ("unknown scenario", ["run", "example-6.3.10"]),
     ("unknown --set key", ["run", "example-6.3.1", "--set", "controller.no_such_gain=1"]),
     ("--set without '='", ["run", "example-6.3.1", "--set", "controller.Kv"]),
@@ -155,6 +167,15 @@ AUDIT = [  # (what is wrong, command-line arguments; FILE is a scenario file wri
     ("compiled Radau (no diffrax counterpart)", ["run", "example-6.3.1", "--backend", "jax", "--set",
                                                  "simulation.method='Radau'"]),
     ("MuJoCo option without the MuJoCo engine", ["run", "example-6.3.1", "--set", "plant.damping=1"]),
+    ("a log without a torque column", ["identify", "CSV:" + _log(2, 50, "t,q1,q2,tau1"), "--robot", "example-6.3.1"]),
+    ("a NaN in a log", ["identify", "CSV:" + _log(2, 50, nan_at=7), "--robot", "example-6.3.1"]),
+    ("time not increasing in a log", ["identify", "CSV:" + _log(2, 50, back_at=5), "--robot", "example-6.3.1"]),
+    ("a log of the wrong joint count", ["identify", "CSV:" + _log(3, 50), "--robot", "example-6.3.1"]),
+    ("a log too short for the base parameters", ["identify", "CSV:" + _log(7, 12), "--robot", "panda-slotine-li"]),
+    ("a log of an arm standing still", ["identify", "CSV:" + _log(7, 50, motion=0.0), "--robot", "panda-slotine-li"]),
+    ("one harmonic of an exciting trajectory", ["excite", "panda-slotine-li", "--harmonics", "1"]),
+    ("an exciting trajectory for an arm without joint limits", ["excite", "example-6.3.1"]),
+    ("limits of the wrong length", ["excite", "panda-slotine-li", "--velocity-limit", "1,2"]),
 ]
 
 
@@ -181,15 +202,17 @@ def audit_page() -> str:
     with tempfile.TemporaryDirectory() as tmp:
         for what, argv in AUDIT:
             args = list(argv)
-            if args[1].startswith("FILE:"):
-                path = Path(tmp) / "scenario.toml"
-                path.write_text(args[1][5:], encoding="utf-8")
-                args[1] = str(path)
+            for prefix, name in (("FILE:", "scenario.toml"), ("CSV:", "log.csv")):
+                if args[1].startswith(prefix):
+                    path = Path(tmp) / name
+                    path.write_text(args[1][len(prefix):], encoding="utf-8")
+                    args[1] = str(path)
             err = io.StringIO()
             with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-                code = main([*args, "--out", str(Path(tmp) / "out")] if args[0] in ("run", "compare") else args)
+                writes = args[0] in ("run", "compare", "identify", "excite")
+                code = main([*args, "--out", str(Path(tmp) / "out")] if writes else args)
             message = _escape_cell(err.getvalue().strip().replace(tmp, "TMP"))
-            shown = " ".join(a if not a.startswith("FILE:") else "FILE" for a in argv)
+            shown = " ".join("FILE" if a.startswith("FILE:") else "LOG.csv" if a.startswith("CSV:") else a for a in argv)
             rows.append(f"| {what}: `robotadapt {shown}` | {code} | {message} |")
     return "\n".join(rows) + "\n"
 

@@ -9,7 +9,6 @@ import json
 
 import numpy as np
 import pytest
-from test_kinematic_tree import URDF  # a two-link arm with <limit lower=-1 upper=1 effort=10 velocity=1>
 
 from robotadapt.cli import main
 from robotadapt.robots.identifiability import base_parameters
@@ -17,6 +16,7 @@ from robotadapt.robots.kinematic_tree import KinematicTree
 from robotadapt.sim.compiled import float64
 from robotadapt.studies.excite import Design, Programs, excite, resolve_limits
 from robotadapt.studies.scenarios import load
+from test_kinematic_tree import URDF  # a two-link arm with <limit lower=-1 upper=1 effort=10 velocity=1>
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,6 @@ from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import fourier
 
 
-
 @pytest.fixture(scope="module")
 def panda():
     return load("panda-slotine-li").setup

@@ -128,7 +128,7 @@ def _checked(t: Array, q: Array, dq: Array | None, tau: Array, source: str) -> J
     for name, value in (("t", t), ("q", q), ("dq", dq), ("tau", tau)):
         if value is not None and not np.all(np.isfinite(value)):
             row = int(np.flatnonzero(~np.all(np.isfinite(value.reshape(t.size, -1)), axis=1))[0])
-            raise ConfigError("DATA", f"{source}: {name} is missing or not finite at sample {row} (t = {t[row]!r}): "
+            raise ConfigError("DATA", f"{source}: {name} is missing or not finite at sample {row} (t = {t[row]:.6g} s): "
                               "remove or fill the gap")
     steps = np.diff(t)
     if np.any(steps <= 0):

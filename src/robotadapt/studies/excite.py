@@ -106,8 +106,8 @@ def resolve_limits(model: RobotModel, given: dict[str, Array | None], fraction: 
         values[kind] = None if value is None else np.asarray(value, dtype=float)
         source[kind] = (label if value is not None else "none",) * n
     if values["position"] is None:
-        raise ConfigError("--position-limit", "the model has no joint limits: give --position-limit X (|q| ≤ X rad) or "
-                          "LO:HI per joint, comma-separated")
+        raise ConfigError("--position-limit", "the model has no joint limits: give --position-limit X (−X ≤ q ≤ X rad) "
+                          "or LO:HI per joint, comma-separated")
     if values["torque"] is not None and model.default_phi is None:
         raise ConfigError("--torque-limit", "the model has no nominal parameters (default_phi) to compute τ with")
     mid, half = values["position"].mean(axis=1), 0.5 * np.diff(values["position"], axis=1)[:, 0]
