@@ -236,3 +236,26 @@ def test_the_identified_urdf_reads_back_as_the_parameters_written(tmp_path, pand
     with pytest.raises(ConfigError, match="row 2 .*mass must be positive"):
         write_identified_urdf(path, locked, bad, tmp_path / "bad.urdf")
     assert not (tmp_path / "bad.urdf").exists()
+
+
+@pytest.mark.slow
+def test_the_identification_study_closes_the_loop(tmp_path):
+    """examples/identification_study.py end to end (about 140 s): the optimised trajectory is better conditioned than the
+    packaged one by two orders; the log of an arm with unmodelled friction, quantisation and noise identifies the base
+    parameters within 1 % with friction columns (worse without); under the natural law and a payload, the identified
+    start keeps a smaller base error and tracking error before the payload than the 30 % low one."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("identification_study",
+                                                  Path(__file__).parents[1] / "examples" / "identification_study.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    study = module.run(tmp_path)
+    ex = study["excitation"]["cond"]
+    assert ex["cond"] < ex["cond_packaged"] / 100
+    ident = study["closed_loop"]["identify"]
+    assert ident["friction columns"]["base_error"] < 0.01 < ident["friction-free model"]["base_error"]
+    runs = study["closed_loop"]["payload"]
+    good, low = runs["natural, γ = 0.1 | identified"], runs["natural, γ = 0.1 | 30 % low"]
+    assert good["base_error_at_10"] < low["base_error_at_10"] / 2 and good["rms_deg_0_10"] < low["rms_deg_0_10"]
+    assert (tmp_path / "study.md").exists()
