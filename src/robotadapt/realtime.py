@@ -18,14 +18,18 @@ and runs no Python of the law. The compiled step runs synchronously, on a CPU cl
 latency (the Panda's step measured p50 54 → 29 µs, p99 217 → 67 µs, max 4189 → 226 µs without it), and
 `jax_cpu_enable_async_dispatch` cannot be scoped: JAX reads it once, when it creates its CPU client, so
 `jax.config.update` afterwards changes nothing, and it has no context manager. The private client leaves that setting,
-and JAX's own client that the rest of a program uses, as they were. "numpy" calls the law itself (a Pinocchio model,
-whose C++ JAX cannot trace, takes it). "auto" takes "jax" where the model is traceable: measured 5–17 times faster at
-p50 (docs/realtime.md, benchmarks/bench_realtime.py). A guarded law's guard (adaptive computed torque's M̂ ≻ 0)
-raises on the numpy backend and is not read on the compiled one.
+and JAX's own client that the rest of a program uses, as they were. "c" translates the same traced tick to C
+(:mod:`robotadapt.native`: the export `robotadapt export` writes), builds it with the system's C compiler (cached on
+disk by its source) and calls it through ctypes on preallocated buffers. "numpy" calls the law itself (a Pinocchio
+model, whose C++ JAX cannot trace, takes it). "auto" takes "c" where the model is traceable and a compiler is present
+(else "jax", saying once why), and "jax" where the translator lacks one of the tick's primitives (the natural law's
+matrix exponential). A guarded law's guard (adaptive computed torque's M̂ ≻ 0) raises on the numpy backend and is not
+read on the compiled ones.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cache, partial
@@ -35,10 +39,13 @@ import numpy as np
 
 from .arrays import array_namespace
 from .controllers.base import HasDelayLine, Prepares
+from .native.build import INSTALL, compiler, require_compiler, shared_library
+from .native.c99 import Unsupported
+from .native.controller import Export, export
 from .plant.actuators import Actuator
 from .plant.sensors import Sensor
 from .sim.compiled import float64, jax_module
-from .sim.integrators import Sampled, check_backend
+from .sim.integrators import Sampled
 from .sim.loop import ClosedLoop
 from .sim.sampled import Carry, Inputs, Tick
 from .studies.scenarios import load
@@ -46,6 +53,18 @@ from .trajectories import Trajectory
 from .validation import ConfigError, as_scalar, as_vector
 
 Array = Any
+
+
+BACKENDS = ("auto", "numpy", "jax", "c")
+
+
+def start(loop_tick: Tick, Ts: float, q: Array, dq: Array) -> Carry:
+    """The carry before tick 0 at the measured (q, q̇): the law's initial state, the measurement memory and the delay
+    line's initial contents."""
+    ctrl = loop_tick.loop.controller
+    xp = array_namespace(q, dq)
+    line = ctrl.delay_line(Ts, q, dq) if loop_tick.has_line else None
+    return loop_tick.start(xp.concatenate([q, dq, ctrl.initial_state(q, dq)]), line)
 
 
 def tick(loop_tick: Tick, trajectory: Trajectory, k: Array, t: Array, carry: Carry, q: Array,
@@ -85,15 +104,23 @@ class RealtimeController:
     _step: Callable[[Any, np.ndarray], tuple[Array, Any]] | None = field(default=None, init=False, repr=False)
     _unravel: Callable[[Any], Carry] | None = field(default=None, init=False, repr=False)
     _k: int = field(default=0, init=False, repr=False)
+    _native: Native | None = field(default=None, init=False, repr=False)
+    _auto: bool = field(default=False, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.Ts = as_scalar(self.Ts, "simulation.control_period", positive=True)
-        backend = check_backend(self.backend)
+        if self.backend not in BACKENDS:
+            raise ConfigError("simulation.backend", f"expected one of {', '.join(BACKENDS)}; got {self.backend!r}")
         traceable = self.loop_tick.loop.controller.model.traceable
-        if backend == "jax" and not traceable:
+        if self.backend in ("jax", "c") and not traceable:
             raise ConfigError("simulation.backend", "the controller's model calls compiled code JAX cannot trace "
-                              "(Pinocchio): use backend = 'numpy', or robot.model = 'tree'")
-        self.backend = "jax" if backend == "auto" and traceable else "numpy" if backend == "auto" else backend
+                              f"(Pinocchio), so the {self.backend!r} backend cannot have it: use backend = 'numpy', "
+                              "or robot.model = 'tree'")
+        if self.backend == "c":
+            require_compiler("simulation.backend")
+        self._auto = self.backend == "auto"
+        if self.backend == "auto":
+            self.backend = "numpy" if not traceable else "c" if compiler() is not None else _without_compiler()
 
     @classmethod
     def from_scenario(cls, scenario: str, overrides: Sequence[str] = (), backend: str = "auto") -> RealtimeController:
@@ -117,14 +144,40 @@ class RealtimeController:
         return self.loop_tick.loop.n
 
     @float64
+    def programs(self) -> tuple[Any, Any]:
+        """The traced programs of the export (:mod:`robotadapt.native.controller`): `tick` (state, [k, t, q, q̇]) ->
+        (τ, state) and `init` (q, q̇) -> state, the state the carry raveled into one float64 vector."""
+        jax = jax_module()
+        from jax.flatten_util import ravel_pytree
+
+        n = self.n
+        zeros = np.zeros(n)
+        flat, unravel = ravel_pytree(jax.tree_util.tree_map(jax.numpy.asarray, start(self.loop_tick, self.Ts, zeros,
+                                                                                     zeros)))
+        step = jax.make_jaxpr(partial(packed, self.loop_tick, self.trajectory, ravel_pytree, unravel))(
+            flat, np.zeros(2 + 2 * n))
+        init = jax.make_jaxpr(lambda q, dq: ravel_pytree(start(self.loop_tick, self.Ts, q, dq))[0])(zeros, zeros)
+        return step, init
+
+    def export(self, prefix: str = "ra", what: str = "") -> Export:
+        """The controller as C (:func:`robotadapt.native.controller.export`)."""
+        step, init = self.programs()
+        return export(step, init, self.n, prefix, what)
+
+    @float64
     def reset(self, q: Any, dq: Any) -> None:
         """Start at the measured (q, q̇): the law's initial state, the measurement memory, tick k = 0; compiles the step
         on first use (the only slow call)."""
-        n, ctrl = self.n, self.loop_tick.loop.controller
+        n = self.n
         q, dq = as_vector(q, n, "q"), as_vector(dq, n, "dq")
-        line = np.array(ctrl.delay_line(self.Ts, q, dq), dtype=float) if self.loop_tick.has_line else None
-        carry = self.loop_tick.start(np.concatenate([q, dq, ctrl.initial_state(q, dq)]), line)
+        carry = start(self.loop_tick, self.Ts, q, dq)
         self._inputs, self._k = np.zeros(2 + 2 * n), 0
+        if self.backend == "c" and self._native is None:
+            self._native = self._build()
+        if self.backend == "c" and self._native is not None:
+            self._native.reset(q, dq)
+            self._state, self._unravel = self._native.state, self._native.unravel
+            return
         if self.backend == "numpy":  # the carry as it is; q and q̇ copied out of the reused input buffer
             self._state, self._unravel = carry, _same
             self._step = partial(packed, self.loop_tick, self.trajectory, _unchanged, _same)
@@ -143,6 +196,8 @@ class RealtimeController:
     @float64  # the step's input buffer is float64, as the program was compiled (1.4 µs here)
     def step(self, t: float, q: Array, dq: Array) -> np.ndarray:
         """τ_k for the measured (q, q̇) at time t (s) of the trajectory; the state moves on to tick k + 1."""
+        if self._native is not None:
+            return self._native.step(t, q, dq)
         if self._step is None:
             raise ConfigError("realtime", "call reset(q, dq) before step(t, q, dq)")
         n, inputs = self.n, self._inputs
@@ -157,7 +212,60 @@ class RealtimeController:
         """The controller's state x_k (φ̂ and filter states), a copy."""
         if self._unravel is None:
             return np.zeros(0)
-        return np.array(self._unravel(self._state).x)
+        return np.array(self._unravel(self._state[1:] if self._native is not None else self._state).x)
+
+    def _build(self) -> Native | None:
+        """The C backend's library (None, and "jax" from now on, where "auto" chose C and the translator lacks a
+        primitive of this tick)."""
+        from jax.flatten_util import ravel_pytree
+
+        try:
+            code = self.export("ra_rt")
+        except Unsupported as exc:
+            if not self._auto:
+                raise
+            warnings.warn(f"robotadapt: {exc}; this controller runs on the 'jax' backend", RuntimeWarning, stacklevel=3)
+            self.backend = "jax"
+            return None
+        zeros = jax_module().numpy.zeros(self.n)
+        unravel = ravel_pytree(start(self.loop_tick, self.Ts, zeros, zeros))[1]
+        return Native(shared_library(code.standalone, "simulation.backend"), code.prefix, self.n, code.state_size,
+                      unravel)
+
+
+class Native:
+    """An exported controller's library (`PREFIX_reset`, `PREFIX_step`) called through ctypes: the state, q, q̇ and τ in
+    buffers allocated once, their addresses passed as integers."""
+
+    def __init__(self, path: Any, prefix: str, n: int, size: int, unravel: Callable[[Any], Carry]) -> None:
+        import ctypes
+
+        library = ctypes.CDLL(str(path))
+        self._reset, self._step = getattr(library, f"{prefix}_reset"), getattr(library, f"{prefix}_step")
+        pointer = ctypes.c_void_p
+        self._reset.argtypes, self._reset.restype = [pointer, pointer, pointer], None
+        self._step.argtypes, self._step.restype = [pointer, ctypes.c_double, pointer, pointer, pointer], None
+        self.state, self.unravel = np.zeros(size), unravel
+        self._q, self._dq, self._tau = np.zeros(n), np.zeros(n), np.zeros(n)
+        self._addresses = tuple(a.ctypes.data for a in (self.state, self._q, self._dq, self._tau))
+
+    def reset(self, q: Array, dq: Array) -> None:
+        self._q[:], self._dq[:] = q, dq
+        state, q_at, dq_at, _ = self._addresses
+        self._reset(state, q_at, dq_at)
+
+    def step(self, t: float, q: Array, dq: Array) -> np.ndarray:
+        self._q[:], self._dq[:] = q, dq
+        self._step(self._addresses[0], t, *self._addresses[1:])
+        return self._tau.copy()
+
+
+@cache
+def _without_compiler() -> str:
+    """'jax', having said once that the C backend needs a compiler."""
+    warnings.warn(f"robotadapt: no C compiler found, so backend = 'auto' runs the controller on 'jax' ({INSTALL})",
+                  RuntimeWarning, stacklevel=4)
+    return "jax"
 
 
 @cache

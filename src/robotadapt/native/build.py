@@ -1,0 +1,115 @@
+"""The system's C compiler, a disk cache of shared libraries keyed by their source, and a traced program called from
+Python through ctypes (docs/native.md).
+
+The compiler is `$CC` where set, else `cc`; a library is built once per distinct source and compiler
+(`$ROBOTADAPT_CACHE/c/<sha256>.so`, default `~/.cache/robotadapt/c`), written under a temporary name and renamed, so
+two processes never load half a file and a second process loads what the first built.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Callable, Sequence
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..validation import ConfigError
+from .c99 import translate
+
+CFLAGS = ("-O2", "-std=c99", "-fPIC", "-shared")
+PRELUDE = "#include <math.h>\n#include <stdint.h>\n#include <stddef.h>\n#include <string.h>\n\n"
+INSTALL = "install one (Debian/Ubuntu: apt-get install gcc; macOS: xcode-select --install) or point CC at it"
+
+
+def compiler() -> str | None:
+    """The C compiler's path: `$CC` (a name on PATH or a path), else `cc`; None when there is none."""
+    name = os.environ.get("CC", "cc").split()[0] if os.environ.get("CC", "cc").strip() else "cc"
+    return shutil.which(name)
+
+
+def require_compiler(field: str) -> str:
+    """The compiler, or a ConfigError naming `field` and how to install one."""
+    found = compiler()
+    if found is None:
+        raise ConfigError(field, f"no C compiler ({os.environ.get('CC', 'cc')!r} not found): {INSTALL}")
+    return found
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("ROBOTADAPT_CACHE", Path.home() / ".cache" / "robotadapt")) / "c"
+
+
+def shared_library(source: str, field: str = "simulation.backend") -> Path:
+    """The shared library of the C `source`, compiled once per source and compiler (module docstring)."""
+    cc = require_compiler(field)
+    key = hashlib.sha256("\0".join([cc, *CFLAGS, source]).encode()).hexdigest()[:32]
+    folder = cache_dir()
+    path = folder / f"{key}.so"
+    if path.exists():
+        return path
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=folder) as tmp:
+        c_file, so_file = Path(tmp) / "program.c", Path(tmp) / "program.so"
+        c_file.write_text(source, encoding="utf-8")
+        done = subprocess.run([cc, *CFLAGS, "-o", str(so_file), str(c_file), "-lm"], capture_output=True, text=True)
+        if done.returncode != 0:
+            first = (done.stderr.strip().splitlines() or ["(no message)"])[0]
+            raise ConfigError(field, f"the C compiler {cc} failed on the translated program: {first}")
+        os.replace(so_file, path)
+    return path
+
+
+def entry(name: str, n_in: int, n_out: int, types: Sequence[str]) -> str:
+    """`void name(void **p)`: the translated `name_impl` called with its inputs and outputs from one pointer table."""
+    args = [f"({'const ' if k < n_in else ''}{t} *)p[{k}]" for k, t in enumerate(types)]
+    return f"void {name}(void **p) {{ {name}_impl({', '.join(args)}); }}\n"
+
+
+@cache
+def _library(path: Path) -> Any:
+    return ctypes.CDLL(str(path))
+
+
+class Compiled:
+    """A ClosedJaxpr as a native function: `compiled(*arrays) -> list of arrays` (the jaxpr's inputs and outputs, by
+    their avals). Each call allocates its outputs; the hot paths (:mod:`robotadapt.native.controller`) keep their own
+    buffers."""
+
+    def __init__(self, closed: Any, name: str = "program", field: str = "simulation.backend") -> None:
+        from .c99 import c_type
+
+        jaxpr = closed.jaxpr
+        self.ins = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.invars]
+        self.outs = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.outvars]
+        types = [c_type(d) for _, d in self.ins + self.outs]
+        self.source = PRELUDE + translate(closed, f"{name}_impl") + entry(name, len(self.ins), len(self.outs), types)
+        self._fn = getattr(_library(shared_library(self.source, field)), name)
+        self._fn.argtypes = [ctypes.POINTER(ctypes.c_void_p)]
+        self._fn.restype = None
+
+    def __call__(self, *args: Any) -> list[np.ndarray]:
+        ins = [np.ascontiguousarray(np.asarray(a, dtype=d).reshape(s)) for a, (s, d) in zip(args, self.ins, strict=True)]
+        outs = [np.empty(s, dtype=d) for s, d in self.outs]
+        table = (ctypes.c_void_p * (len(ins) + len(outs)))(*[a.ctypes.data for a in ins + outs])
+        self._fn(table)
+        return outs
+
+
+def compiled(fn: Callable[..., Any], *examples: Any) -> Compiled:
+    """`fn` traced by JAX on arrays like `examples` and compiled to native code (float64)."""
+    from ..sim.compiled import float64, jax_module
+
+    @float64
+    def trace() -> Any:
+        jax = jax_module()
+        return jax.make_jaxpr(fn)(*examples)
+
+    return Compiled(trace())

@@ -1,0 +1,799 @@
+"""A translator from a traced JAX program (a jaxpr) to one C99 function: static shapes, no allocation, libm only
+(docs/native.md).
+
+`translate(closed, name)` returns the text of `static void name(const T *in0, …, T *out0, …)`: every input and output
+a flat row-major array of its aval's size and C type (float64 → double, int32/int64 → int32_t/int64_t, bool →
+uint8_t). Each equation of the jaxpr becomes a loop nest over its output's static shape that reads its operands
+through linear index expressions; values that only rename a buffer (reshape, squeeze, expand_dims, a cast to the same
+type, copy) share it, nested calls (jit, custom_jvp/custom_vjp, custom_linear_solve's solve) are inlined, and the
+outputs are copied out last, so an output may alias an input (a state updated in place). Temporaries are local arrays;
+those over `STACK_LIMIT` elements are `static` (the function is then not reentrant: one caller at a time).
+
+Every primitive the project's controller ticks and plant steps use is here (:data:`PRIMITIVES`); another raises
+:class:`Unsupported`, naming it. Semantics follow XLA's: integer division and remainder truncate, max/min propagate
+NaN, dynamic slices clamp their start, gather and scatter clamp (CLIP, PROMISE_IN_BOUNDS) or drop (FILL_OR_DROP)
+out-of-range windows as their mode says.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..validation import ConfigError
+
+STACK_LIMIT = 4096  # a temporary with more elements than this is a static array
+C_TYPES = {"float64": "double", "float32": "float", "int64": "int64_t", "int32": "int32_t", "int16": "int16_t",
+           "int8": "int8_t", "uint64": "uint64_t", "uint32": "uint32_t", "uint8": "uint8_t", "bool": "uint8_t"}
+
+
+class Unsupported(ConfigError):
+    """A primitive (or a form of one) the translator does not have."""
+
+    def __init__(self, what: str) -> None:
+        super().__init__("native", f"the C translator has no {what}: run this law with backend = 'jax' (or 'numpy'), "
+                         "or add the primitive to robotadapt.native.c99")
+
+
+@dataclass
+class Ref:
+    """A value in C: a buffer `name` (indexed) or, for a scalar literal, an expression `name`; its shape and dtype."""
+
+    name: str
+    shape: tuple[int, ...]
+    dtype: str
+    scalar_expr: bool = False
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    @property
+    def ctype(self) -> str:
+        return c_type(self.dtype)
+
+    def at(self, index: str) -> str:
+        """The element at the flat `index` (a rank-0 value ignores it)."""
+        if self.scalar_expr:
+            return self.name
+        return f"{self.name}[{index if self.shape else '0'}]"
+
+
+def _fill(value: Any, dtype: str) -> str:
+    """What a FILL_OR_DROP gather gives out of range: `value`, else JAX's default (NaN, the most negative integer, the
+    largest unsigned, true)."""
+    kind = np.dtype(dtype).kind
+    if value is not None:
+        return literal(value, dtype)
+    if kind == "f":
+        return "NAN"
+    if kind == "b":
+        return "1"
+    return literal(np.iinfo(dtype).min if kind == "i" else np.iinfo(dtype).max, dtype)
+
+
+def c_type(dtype: Any) -> str:
+    name = np.dtype(dtype).name
+    if name not in C_TYPES:
+        raise Unsupported(f"C type for dtype {name}")
+    return C_TYPES[name]
+
+
+def literal(value: Any, dtype: Any) -> str:
+    """A C literal of `value` in `dtype` (exact for doubles: 17 significant digits)."""
+    kind = np.dtype(dtype).kind
+    if kind == "b":
+        return "1" if bool(value) else "0"
+    if kind in "iu":
+        whole = int(value)
+        return f"INT64_C({whole})" if abs(whole) > 2**31 - 1 else str(whole)
+    v = float(value)
+    if np.isnan(v):
+        return "NAN"
+    if np.isinf(v):
+        return "INFINITY" if v > 0 else "(-INFINITY)"
+    text = repr(v)
+    return text if any(c in text for c in ".en") else text + ".0"
+
+
+def strides(shape: Sequence[int]) -> list[int]:
+    out, acc = [0] * len(shape), 1
+    for i in range(len(shape) - 1, -1, -1):
+        out[i] = acc
+        acc *= int(shape[i])
+    return out
+
+
+def linear(shape: Sequence[int], index: Sequence[str]) -> str:
+    """The flat row-major index of the multi-index `index` (C expressions) in `shape`."""
+    terms = [f"({e})*{s}" if s != 1 else f"({e})" for e, s, n in zip(index, strides(shape), shape, strict=True)
+             if n != 1]
+    return " + ".join(terms) or "0"
+
+
+def broadcast(shape: Sequence[int], index: Sequence[str]) -> str:
+    """The flat index in an operand of `shape` broadcast (numpy's rules: aligned right, size-1 dimensions repeated) to
+    the output position `index`."""
+    tail = list(index[len(index) - len(shape):]) if shape else []
+    return linear(shape, ["0" if n == 1 else i for n, i in zip(shape, tail, strict=True)])
+
+
+@dataclass
+class Emitter:
+    """Writes the body of one C function: declarations, then statements; `refs` maps jaxpr variables to values."""
+
+    lines: list[str] = field(default_factory=list)
+    decls: list[str] = field(default_factory=list)
+    consts: list[str] = field(default_factory=list)
+    counter: itertools.count = field(default_factory=itertools.count)
+    depth: int = 1
+    tag: str = ""  # the function's name: its file-scope constants are named after it
+
+    def fresh(self, prefix: str = "v") -> str:
+        return f"{prefix}{next(self.counter)}"
+
+    def buffer(self, shape: Sequence[int], dtype: Any) -> Ref:
+        ref = Ref(self.fresh(), tuple(int(s) for s in shape), np.dtype(dtype).name)
+        size = max(ref.size, 1)
+        storage = "static " if size > STACK_LIMIT else ""
+        self.emit(f"{storage}{ref.ctype} {ref.name}[{size}];")
+        return ref
+
+    def constant(self, value: Any) -> Ref:
+        array = np.asarray(value)
+        ref = Ref(self.fresh(f"{self.tag}_c"), array.shape, array.dtype.name)
+        if array.ndim == 0:
+            return Ref(f"(({ref.ctype}){literal(array, array.dtype)})", (), array.dtype.name, scalar_expr=True)
+        items = ", ".join(literal(x, array.dtype) for x in array.ravel()) or "0"
+        self.consts.append(f"static const {ref.ctype} {ref.name}[{max(array.size, 1)}] = {{{items}}};")
+        return ref
+
+    def emit(self, line: str) -> None:
+        self.lines.append("    " * self.depth + line)
+
+    def loop(self, shape: Sequence[int], body: Callable[[list[str]], list[str]]) -> None:
+        """A loop nest over `shape` whose innermost statements are `body(index variables)`."""
+        names = [self.fresh("i") for _ in shape]
+        for name, n in zip(names, shape, strict=True):
+            self.emit(f"for (int {name} = 0; {name} < {int(n)}; {name}++) {{")
+            self.depth += 1
+        for line in body(names):
+            self.emit(line)
+        for _ in shape:
+            self.depth -= 1
+            self.emit("}")
+
+
+# -- elementwise -------------------------------------------------------------------------------------------------------
+
+def _float(ref: Ref) -> bool:
+    return np.dtype(ref.dtype).kind == "f"
+
+
+UNARY: dict[str, Callable[[str, Ref], str]] = {
+    "neg": lambda x, r: f"-({x})", "sin": lambda x, r: f"sin({x})", "cos": lambda x, r: f"cos({x})",
+    "tan": lambda x, r: f"tan({x})", "asin": lambda x, r: f"asin({x})", "acos": lambda x, r: f"acos({x})",
+    "atan": lambda x, r: f"atan({x})", "sinh": lambda x, r: f"sinh({x})", "cosh": lambda x, r: f"cosh({x})",
+    "tanh": lambda x, r: f"tanh({x})", "exp": lambda x, r: f"exp({x})", "exp2": lambda x, r: f"exp2({x})",
+    "log": lambda x, r: f"log({x})", "log1p": lambda x, r: f"log1p({x})", "expm1": lambda x, r: f"expm1({x})",
+    "sqrt": lambda x, r: f"sqrt({x})", "rsqrt": lambda x, r: f"(1.0/sqrt({x}))", "cbrt": lambda x, r: f"cbrt({x})",
+    "floor": lambda x, r: f"floor({x})", "ceil": lambda x, r: f"ceil({x})",
+    "round": lambda x, r: f"round({x})",
+    "abs": lambda x, r: f"fabs({x})" if _float(r) else f"(({x}) < 0 ? -({x}) : ({x}))",
+    "sign": lambda x, r: f"(({x}) > 0) - (({x}) < 0)" if not _float(r) else
+    f"(isnan({x}) ? ({x}) : (double)((({x}) > 0) - (({x}) < 0)))",
+    "logistic": lambda x, r: f"(1.0/(1.0 + exp(-({x}))))",
+    "not": lambda x, r: f"!({x})" if r.dtype == "bool" else f"~({x})",
+    "is_finite": lambda x, r: f"isfinite({x})",
+    "square": lambda x, r: f"(({x})*({x}))",
+}
+
+
+def _max(a: str, b: str, ref: Ref, op: str) -> str:
+    if not _float(ref):
+        return f"(({a}) {op} ({b}) ? ({a}) : ({b}))"
+    return f"(isnan({a}) ? ({a}) : isnan({b}) ? ({b}) : ({a}) {op} ({b}) ? ({a}) : ({b}))"
+
+
+BINARY: dict[str, Callable[[str, str, Ref], str]] = {
+    "add": lambda a, b, r: f"({a}) + ({b})", "sub": lambda a, b, r: f"({a}) - ({b})",
+    "mul": lambda a, b, r: f"({a}) * ({b})", "div": lambda a, b, r: f"({a}) / ({b})",
+    "rem": lambda a, b, r: f"fmod({a}, {b})" if _float(r) else f"({a}) % ({b})",
+    "pow": lambda a, b, r: f"pow({a}, {b})", "atan2": lambda a, b, r: f"atan2({a}, {b})",
+    "nextafter": lambda a, b, r: f"nextafter({a}, {b})",
+    "max": lambda a, b, r: _max(a, b, r, ">"), "min": lambda a, b, r: _max(a, b, r, "<"),
+    "eq": lambda a, b, r: f"({a}) == ({b})", "ne": lambda a, b, r: f"({a}) != ({b})",
+    "lt": lambda a, b, r: f"({a}) < ({b})", "le": lambda a, b, r: f"({a}) <= ({b})",
+    "gt": lambda a, b, r: f"({a}) > ({b})", "ge": lambda a, b, r: f"({a}) >= ({b})",
+    "and": lambda a, b, r: f"({a}) && ({b})" if r.dtype == "bool" else f"({a}) & ({b})",
+    "or": lambda a, b, r: f"({a}) || ({b})" if r.dtype == "bool" else f"({a}) | ({b})",
+    "xor": lambda a, b, r: f"({a}) != ({b})" if r.dtype == "bool" else f"({a}) ^ ({b})",
+}
+
+
+class Translator:
+    """Translates one jaxpr (with its constants) into statements of an :class:`Emitter`."""
+
+    def __init__(self, em: Emitter) -> None:
+        self.em = em
+
+    def run(self, jaxpr: Any, consts: Sequence[Any], args: Sequence[Ref]) -> list[Ref]:
+        """The output values of `jaxpr` on `args`, its constvars bound to `consts`."""
+        env: dict[Any, Ref] = {}
+        for var, value in zip(jaxpr.constvars, consts, strict=True):
+            env[var] = value if isinstance(value, Ref) else self.em.constant(value)
+        for var, ref in zip(jaxpr.invars, args, strict=True):
+            env[var] = ref
+
+        def read(atom: Any) -> Ref:
+            if hasattr(atom, "val"):  # a Literal
+                return self.em.constant(np.asarray(atom.val, dtype=atom.aval.dtype))
+            return env[atom]
+
+        for eqn in jaxpr.eqns:
+            outs = self.equation(eqn, [read(a) for a in eqn.invars])
+            for var, ref in zip(eqn.outvars, outs, strict=True):
+                env[var] = ref
+        return [read(v) for v in jaxpr.outvars]
+
+    def equation(self, eqn: Any, ins: list[Ref]) -> list[Ref]:
+        name = eqn.primitive.name
+        handler = getattr(self, "p_" + name.replace("-", "_"), None)
+        outs = [(tuple(v.aval.shape), np.dtype(v.aval.dtype).name) for v in eqn.outvars]
+        if name in UNARY:
+            return [self.elementwise(lambda x: UNARY[name](x[0], ins[0]), ins, outs[0])]
+        if name in BINARY:
+            return [self.elementwise(lambda x: BINARY[name](x[0], x[1], ins[0]), ins, outs[0])]
+        if handler is None:
+            raise Unsupported(f"primitive '{name}'")
+        result = handler(ins, outs, **eqn.params)
+        return result if isinstance(result, list) else [result]
+
+    # -- helpers ----------------------------------------------------------------------------------------------------------
+
+    def elementwise(self, expr: Callable[[list[str]], str], ins: Sequence[Ref], out: tuple[tuple[int, ...], str]) -> Ref:
+        shape, dtype = out
+        ref = self.em.buffer(shape, dtype)
+        ct = ref.ctype
+
+        def body(ix: list[str]) -> list[str]:
+            flat = linear(shape, ix)
+            args = [r.at(flat if r.shape == shape else broadcast(r.shape, ix)) for r in ins]
+            return [f"{ref.name}[{flat}] = ({ct})({expr(args)});"]
+
+        self.em.loop(shape, body)
+        return ref
+
+    def alias(self, ref: Ref, out: tuple[tuple[int, ...], str]) -> Ref:
+        """The same elements under another shape (no copy)."""
+        if ref.scalar_expr:
+            return Ref(ref.name, out[0], out[1], scalar_expr=True)
+        return Ref(ref.name, out[0], out[1])
+
+    def copy(self, ref: Ref) -> Ref:
+        out = self.em.buffer(ref.shape, ref.dtype)
+        self.em.loop([max(ref.size, 1)], lambda ix: [f"{out.name}[{ix[0]}] = {ref.at(ix[0])};"])
+        return out
+
+    def gathered(self, shape: Sequence[int], dtype: str, source: Callable[[list[str]], str]) -> Ref:
+        """A new buffer of `shape` whose element at each multi-index is `source(index variables)`."""
+        ref = self.em.buffer(shape, dtype)
+        self.em.loop(shape, lambda ix: [f"{ref.name}[{linear(shape, ix)}] = ({ref.ctype})({source(ix)});"])
+        return ref
+
+    def call(self, closed: Any, ins: Sequence[Ref]) -> list[Ref]:
+        jaxpr = getattr(closed, "jaxpr", closed)
+        consts = getattr(closed, "consts", [])
+        return Translator(self.em).run(jaxpr, consts, ins)
+
+    # -- shape and data movement --------------------------------------------------------------------------------------
+
+    def p_convert_element_type(self, ins: list[Ref], outs: list, new_dtype: Any, **_: Any) -> Ref:
+        if np.dtype(new_dtype).name == ins[0].dtype:
+            return self.alias(ins[0], outs[0])
+        x = ins[0]
+        if np.dtype(new_dtype).kind in "iu" and _float(x):  # XLA truncates toward zero, as C does
+            return self.elementwise(lambda a: a[0], ins, outs[0])
+        if np.dtype(new_dtype).kind == "b":
+            return self.elementwise(lambda a: f"({a[0]}) != 0", ins, outs[0])
+        return self.elementwise(lambda a: a[0], ins, outs[0])
+
+    def p_reshape(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
+        return self.alias(ins[0], outs[0])
+
+    p_squeeze = p_reshape
+    p_expand_dims = p_reshape
+
+    def p_copy(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
+        return self.alias(ins[0], outs[0])
+
+    p_copy_p = p_copy
+    p_stop_gradient = p_copy
+    p_optimization_barrier = p_copy
+    p_reduce_precision = p_copy
+
+    def p_broadcast_in_dim(self, ins: list[Ref], outs: list, broadcast_dimensions: Sequence[int], **_: Any) -> Ref:
+        x, (shape, dtype) = ins[0], outs[0]
+        if x.size == int(np.prod(shape)) and not x.scalar_expr:
+            return self.alias(x, outs[0])
+        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [
+            "0" if x.shape[j] == 1 else ix[d] for j, d in enumerate(broadcast_dimensions)])))
+
+    def p_slice(self, ins: list[Ref], outs: list, start_indices: Sequence[int], strides: Sequence[int] | None = None,
+                **_: Any) -> Ref:
+        x, (shape, dtype) = ins[0], outs[0]
+        step = strides or [1] * len(shape)
+        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [
+            f"{int(s)} + {i}*{int(k)}" for s, i, k in zip(start_indices, ix, step, strict=True)])))
+
+    def p_rev(self, ins: list[Ref], outs: list, dimensions: Sequence[int], **_: Any) -> Ref:
+        x, (shape, dtype) = ins[0], outs[0]
+        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [
+            f"{shape[d] - 1} - {i}" if d in dimensions else i for d, i in enumerate(ix)])))
+
+    def p_transpose(self, ins: list[Ref], outs: list, permutation: Sequence[int], **_: Any) -> Ref:
+        x, (shape, dtype) = ins[0], outs[0]
+        inverse = {p: j for j, p in enumerate(permutation)}
+        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [ix[inverse[k]] for k in range(len(x.shape))])))
+
+    def p_concatenate(self, ins: list[Ref], outs: list, dimension: int, **_: Any) -> Ref:
+        shape, dtype = outs[0]
+        ref = self.em.buffer(shape, dtype)
+        offset = 0
+        for x in ins:
+            def body(ix: list[str], x: Ref = x, offset: int = offset) -> list[str]:
+                at = [f"{i} + {offset}" if d == dimension else i for d, i in enumerate(ix)]
+                return [f"{ref.name}[{linear(shape, at)}] = ({ref.ctype}){x.at(linear(x.shape, ix))};"]
+
+            self.em.loop(x.shape, body)
+            offset += x.shape[dimension]
+        return ref
+
+    def p_stack(self, ins: list[Ref], outs: list, axis: int, **_: Any) -> Ref:
+        shape, dtype = outs[0]
+        ref = self.em.buffer(shape, dtype)
+        for k, x in enumerate(ins):
+            def body(ix: list[str], x: Ref = x, k: int = k) -> list[str]:
+                at = [*ix[:axis], str(k), *ix[axis:]]
+                return [f"{ref.name}[{linear(shape, at)}] = ({ref.ctype}){x.at(linear(x.shape, ix))};"]
+
+            self.em.loop(x.shape, body)
+        return ref
+
+    def p_split(self, ins: list[Ref], outs: list, sizes: Sequence[int], axis: int, **_: Any) -> list[Ref]:
+        x, result, offset = ins[0], [], 0
+        for shape, dtype in outs:
+            def source(ix: list[str], offset: int = offset) -> str:
+                return x.at(linear(x.shape, [f"{i} + {offset}" if d == axis else i for d, i in enumerate(ix)]))
+
+            result.append(self.gathered(shape, dtype, source))
+            offset += shape[axis]
+        return result
+
+    def p_pad(self, ins: list[Ref], outs: list, padding_config: Sequence[tuple[int, int, int]], **_: Any) -> Ref:
+        x, value, (shape, dtype) = ins[0], ins[1], outs[0]
+        ref = self.em.buffer(shape, dtype)
+        self.em.loop([max(ref.size, 1)], lambda ix: [f"{ref.name}[{ix[0]}] = {value.at('0')};"])
+
+        def body(ix: list[str]) -> list[str]:
+            at = [f"{lo} + {i}*{interior + 1}" for (lo, _, interior), i in zip(padding_config, ix, strict=True)]
+            checks = " && ".join(f"({a}) >= 0 && ({a}) < {n}" for a, n in zip(at, shape, strict=True)) or "1"
+            return [f"if ({checks}) {ref.name}[{linear(shape, at)}] = {x.at(linear(x.shape, ix))};"]
+
+        self.em.loop(x.shape, body)
+        return ref
+
+    def p_iota(self, ins: list[Ref], outs: list, dimension: int, **_: Any) -> Ref:
+        shape, dtype = outs[0]
+        return self.gathered(shape, dtype, lambda ix: ix[dimension])
+
+    def p_select_n(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
+        def expr(a: list[str]) -> str:  # case[pred]: a boolean picks case 1 when true, an integer its case
+            pred, cases = a[0], a[1:]
+            text = cases[-1]
+            for k in range(len(cases) - 2, -1, -1):
+                text = f"(({pred}) == {k} ? ({cases[k]}) : ({text}))"
+            return text
+
+        return self.elementwise(expr, ins, outs[0])
+
+    def p_clamp(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
+        return self.elementwise(lambda a: f"(({a[1]}) < ({a[0]}) ? ({a[0]}) : ({a[1]}) > ({a[2]}) ? ({a[2]}) : ({a[1]}))",
+                                ins, outs[0])
+
+    def p_integer_pow(self, ins: list[Ref], outs: list, y: int, **_: Any) -> Ref:
+        def expr(a: list[str]) -> str:
+            if y == 0:
+                return "1"
+            product = "*".join([f"({a[0]})"] * abs(y))
+            return product if y > 0 else f"1.0/({product})"
+
+        return self.elementwise(expr, ins, outs[0])
+
+    # -- reductions ---------------------------------------------------------------------------------------------------
+
+    def _reduce(self, ins: list[Ref], outs: list, axes: Sequence[int], init: str, update: str) -> Ref:
+        x, (shape, dtype) = ins[0], outs[0]
+        ref = self.em.buffer(shape, dtype)
+        self.em.loop([max(ref.size, 1)], lambda ix: [f"{ref.name}[{ix[0]}] = {init};"])
+        kept = [d for d in range(len(x.shape)) if d not in axes]
+
+        def body(ix: list[str]) -> list[str]:
+            out = f"{ref.name}[{linear(shape, [ix[d] for d in kept])}]"
+            return [f"{out} = " + update.format(acc=out, x=x.at(linear(x.shape, ix))) + ";"]
+
+        self.em.loop(x.shape, body)
+        return ref
+
+    def p_reduce_sum(self, ins: list[Ref], outs: list, axes: Sequence[int], **_: Any) -> Ref:
+        return self._reduce(ins, outs, axes, "0", "{acc} + {x}")
+
+    def p_reduce_prod(self, ins: list[Ref], outs: list, axes: Sequence[int], **_: Any) -> Ref:
+        return self._reduce(ins, outs, axes, "1", "{acc} * {x}")
+
+    def p_reduce_max(self, ins: list[Ref], outs: list, axes: Sequence[int], **_: Any) -> Ref:
+        low = "(-INFINITY)" if _float(ins[0]) else f"{np.iinfo(ins[0].dtype).min}"
+        return self._reduce(ins, outs, axes, low, _max("{acc}", "{x}", ins[0], ">"))
+
+    def p_reduce_min(self, ins: list[Ref], outs: list, axes: Sequence[int], **_: Any) -> Ref:
+        high = "INFINITY" if _float(ins[0]) else f"{np.iinfo(ins[0].dtype).max}"
+        return self._reduce(ins, outs, axes, high, _max("{acc}", "{x}", ins[0], "<"))
+
+    def p_reduce_and(self, ins: list[Ref], outs: list, axes: Sequence[int], **_: Any) -> Ref:
+        return self._reduce(ins, outs, axes, "1", "{acc} && {x}")
+
+    def p_reduce_or(self, ins: list[Ref], outs: list, axes: Sequence[int], **_: Any) -> Ref:
+        return self._reduce(ins, outs, axes, "0", "{acc} || {x}")
+
+    def _cumulative(self, ins: list[Ref], outs: list, axis: int, reverse: bool, op: str) -> Ref:
+        x, (shape, dtype) = ins[0], outs[0]
+        ref = self.em.buffer(shape, dtype)
+        others = [n if d != axis else 1 for d, n in enumerate(shape)]
+        n = shape[axis]
+
+        def body(ix: list[str]) -> list[str]:
+            k = self.em.fresh("k")
+            pos = f"{n - 1} - {k}" if reverse else k
+            prev = f"{pos} + 1" if reverse else f"{pos} - 1"
+            at = linear(shape, [pos if d == axis else i for d, i in enumerate(ix)])
+            before = linear(shape, [prev if d == axis else i for d, i in enumerate(ix)])
+            combine = {"add": f"{ref.name}[{before}] + {x.at(at)}", "mul": f"{ref.name}[{before}] * {x.at(at)}",
+                       "max": _max(f"{ref.name}[{before}]", x.at(at), x, ">"),
+                       "min": _max(f"{ref.name}[{before}]", x.at(at), x, "<")}[op]
+            return [f"for (int {k} = 0; {k} < {n}; {k}++) {{",
+                    f"    {ref.name}[{at}] = {k} == 0 ? {x.at(at)} : {combine};", "}"]
+
+        self.em.loop(others, body)
+        return ref
+
+    def p_cumsum(self, ins: list[Ref], outs: list, axis: int, reverse: bool = False, **_: Any) -> Ref:
+        return self._cumulative(ins, outs, axis, reverse, "add")
+
+    def p_cumprod(self, ins: list[Ref], outs: list, axis: int, reverse: bool = False, **_: Any) -> Ref:
+        return self._cumulative(ins, outs, axis, reverse, "mul")
+
+    def p_cummax(self, ins: list[Ref], outs: list, axis: int, reverse: bool = False, **_: Any) -> Ref:
+        return self._cumulative(ins, outs, axis, reverse, "max")
+
+    def p_cummin(self, ins: list[Ref], outs: list, axis: int, reverse: bool = False, **_: Any) -> Ref:
+        return self._cumulative(ins, outs, axis, reverse, "min")
+
+    def p_dot_general(self, ins: list[Ref], outs: list, dimension_numbers: Any, **_: Any) -> Ref:
+        (lc, rc), (lb, rb) = dimension_numbers
+        a, b, (shape, dtype) = ins[0], ins[1], outs[0]
+        ref = self.em.buffer(shape, dtype)
+        lfree = [d for d in range(len(a.shape)) if d not in lc and d not in lb]
+        rfree = [d for d in range(len(b.shape)) if d not in rc and d not in rb]
+        sizes = [a.shape[d] for d in lc]
+
+        def body(ix: list[str]) -> list[str]:
+            ks = [self.em.fresh("k") for _ in lc]
+            nb = len(lb)
+            ai = [ix[list(lb).index(d)] if d in lb else ks[list(lc).index(d)] if d in lc else
+                  ix[nb + lfree.index(d)] for d in range(len(a.shape))]
+            bi = [ix[list(rb).index(d)] if d in rb else ks[list(rc).index(d)] if d in rc else
+                  ix[nb + len(lfree) + rfree.index(d)] for d in range(len(b.shape))]
+            acc = self.em.fresh("s")
+            lines = [f"{ref.ctype} {acc} = 0;"]
+            lines += [f"{'    ' * j}for (int {k} = 0; {k} < {n}; {k}++) {{" for j, (k, n) in enumerate(zip(ks, sizes,
+                                                                                                          strict=True))]
+            lines.append(f"{'    ' * len(ks)}{acc} += {a.at(linear(a.shape, ai))} * {b.at(linear(b.shape, bi))};")
+            lines += [f"{'    ' * j}}}" for j in range(len(ks) - 1, -1, -1)]
+            return [*lines, f"{ref.name}[{linear(shape, ix)}] = {acc};"]
+
+        self.em.loop(shape, body)
+        return ref
+
+    # -- dynamic indexing ---------------------------------------------------------------------------------------------
+
+    def _start(self, start: Ref, dim: int, size: int) -> str:
+        s = start.at("0")
+        return f"(({s}) < 0 ? 0 : ({s}) > {dim - size} ? {dim - size} : ({s}))"
+
+    def p_dynamic_slice(self, ins: list[Ref], outs: list, slice_sizes: Sequence[int], **_: Any) -> Ref:
+        x, starts, (shape, dtype) = ins[0], ins[1:], outs[0]
+        names = []
+        for d, s in enumerate(starts):
+            name = self.em.fresh("o")
+            self.em.emit(f"const int64_t {name} = {self._start(s, x.shape[d], slice_sizes[d])};")
+            names.append(name)
+        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [f"{o} + {i}" for o, i in zip(names, ix,
+                                                                                                         strict=True)])))
+
+    def p_dynamic_update_slice(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
+        x, update, starts = ins[0], ins[1], ins[2:]
+        ref = self.copy(x)
+        names = []
+        for d, s in enumerate(starts):
+            name = self.em.fresh("o")
+            self.em.emit(f"const int64_t {name} = {self._start(s, x.shape[d], update.shape[d])};")
+            names.append(name)
+        self.em.loop(update.shape, lambda ix: [
+            f"{ref.name}[{linear(x.shape, [f'{o} + {i}' for o, i in zip(names, ix, strict=True)])}] = "
+            f"{update.at(linear(update.shape, ix))};"])
+        return ref
+
+    def _window_start(self, indices: Ref, batch: list[str], index_dim: int, k: int) -> str:
+        """Component k of the start index vector at the batch position `batch` of `indices` (index_vector_dim last)."""
+        at = [*batch]
+        at.insert(index_dim, str(k))
+        return indices.at(linear(indices.shape, at))
+
+    def p_gather(self, ins: list[Ref], outs: list, dimension_numbers: Any, slice_sizes: Sequence[int], mode: Any,
+                 fill_value: Any = None, **_: Any) -> Ref:
+        x, indices, (shape, dtype) = ins[0], ins[1], outs[0]
+        dn = dimension_numbers
+        if dn.operand_batching_dims:
+            raise Unsupported("gather with batching dimensions")
+        offset_dims, collapsed, start_map = list(dn.offset_dims), list(dn.collapsed_slice_dims), list(dn.start_index_map)
+        index_dim = len(indices.shape) - 1
+        fill = "FILL_OR_DROP" in str(mode)
+        window = [d for d in range(len(x.shape)) if d not in collapsed]
+        ref = self.em.buffer(shape, dtype)
+
+        def body(ix: list[str]) -> list[str]:
+            batch = [i for d, i in enumerate(ix) if d not in offset_dims]
+            offs = {window[j]: ix[d] for j, d in enumerate(offset_dims)}
+            lines, at, inside = [], [], []
+            for d in range(len(x.shape)):
+                o = offs.get(d, "0")
+                if d in start_map:
+                    s = self.em.fresh("o")
+                    raw = self._window_start(indices, batch, index_dim, start_map.index(d))
+                    limit = x.shape[d] - slice_sizes[d]
+                    if fill:
+                        lines.append(f"const int64_t {s} = {raw};")
+                        inside.append(f"{s} >= 0 && {s} <= {limit}")
+                    else:
+                        lines.append(f"const int64_t {s} = ({raw}) < 0 ? 0 : ({raw}) > {limit} ? {limit} : ({raw});")
+                    at.append(f"{s} + {o}")
+                else:
+                    at.append(o)
+            value = x.at(linear(x.shape, at))
+            if inside:
+                value = f"({' && '.join(inside)}) ? {value} : {_fill(fill_value, dtype)}"
+            return [*lines, f"{ref.name}[{linear(shape, ix)}] = {value};"]
+
+        self.em.loop(shape, body)
+        return ref
+
+    def _scatter(self, ins: list[Ref], outs: list, dimension_numbers: Any, mode: Any, combine: str) -> Ref:
+        x, indices, updates = ins[0], ins[1], ins[2]
+        dn = dimension_numbers
+        if dn.operand_batching_dims:
+            raise Unsupported("scatter with batching dimensions")
+        window_dims, inserted, to_operand = list(dn.update_window_dims), list(dn.inserted_window_dims), list(
+            dn.scatter_dims_to_operand_dims)
+        index_dim = len(indices.shape) - 1
+        drop = "FILL_OR_DROP" in str(mode) or "PROMISE" not in str(mode) and "CLIP" not in str(mode)
+        ref = self.copy(x)
+        window = [d for d in range(len(x.shape)) if d not in inserted]
+        window_size = {window[j]: updates.shape[d] for j, d in enumerate(window_dims)}
+
+        def body(ix: list[str]) -> list[str]:
+            batch = [i for d, i in enumerate(ix) if d not in window_dims]
+            offs = {window[j]: ix[d] for j, d in enumerate(window_dims)}
+            lines, at, inside = [], [], []
+            for d in range(len(x.shape)):
+                o = offs.get(d, "0")
+                if d in to_operand:
+                    s = self.em.fresh("o")
+                    raw = self._window_start(indices, batch, index_dim, to_operand.index(d))
+                    limit = x.shape[d] - window_size.get(d, 1)
+                    if drop:
+                        lines.append(f"const int64_t {s} = {raw};")
+                        inside.append(f"{s} >= 0 && {s} <= {limit}")
+                    else:
+                        lines.append(f"const int64_t {s} = ({raw}) < 0 ? 0 : ({raw}) > {limit} ? {limit} : ({raw});")
+                    at.append(f"{s} + {o}")
+                else:
+                    at.append(o)
+            target = f"{ref.name}[{linear(x.shape, at)}]"
+            value = updates.at(linear(updates.shape, ix))
+            statement = f"{target} = {combine.format(acc=target, x=value)};"
+            return [*lines, f"if ({' && '.join(inside)}) {statement}" if inside else statement]
+
+        self.em.loop(updates.shape, body)
+        return ref
+
+    def p_scatter(self, ins: list[Ref], outs: list, dimension_numbers: Any, mode: Any, **_: Any) -> Ref:
+        return self._scatter(ins, outs, dimension_numbers, mode, "{x}")
+
+    def p_scatter_add(self, ins: list[Ref], outs: list, dimension_numbers: Any, mode: Any, **_: Any) -> Ref:
+        return self._scatter(ins, outs, dimension_numbers, mode, "{acc} + {x}")
+
+    # -- nested programs ----------------------------------------------------------------------------------------------
+
+    def p_jit(self, ins: list[Ref], outs: list, jaxpr: Any, **_: Any) -> list[Ref]:
+        return self.call(jaxpr, ins)
+
+    p_pjit = p_jit
+    p_closed_call = p_jit
+    p_core_call = p_jit
+
+    def p_custom_jvp_call(self, ins: list[Ref], outs: list, call_jaxpr: Any, **_: Any) -> list[Ref]:
+        return self.call(call_jaxpr, ins)
+
+    def p_custom_vjp_call(self, ins: list[Ref], outs: list, **params: Any) -> list[Ref]:
+        return self.call(params.get("call_jaxpr", params.get("fun_jaxpr")), ins)
+
+    p_custom_vjp_call_jaxpr = p_custom_vjp_call
+
+    def p_remat(self, ins: list[Ref], outs: list, jaxpr: Any, **_: Any) -> list[Ref]:
+        return self.call(jaxpr, ins)
+
+    p_checkpoint = p_remat
+
+    def p_custom_linear_solve(self, ins: list[Ref], outs: list, const_lengths: Any, jaxprs: Any, **_: Any) -> list[Ref]:
+        """x = solve(b): the `solve` program with its constants (matvec's and the transposes' are for derivatives)."""
+        lengths = [const_lengths.matvec, const_lengths.vecmat, const_lengths.solve, const_lengths.transpose_solve]
+        start = sum(lengths[:2])
+        consts, b = ins[start : start + lengths[2]], ins[sum(lengths):]
+        return self.call(jaxprs.solve, [*consts, *b])
+
+    # -- small dense linear algebra -----------------------------------------------------------------------------------
+
+    def p_cholesky(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
+        """L with A = L Lᵀ (lower; zeros above the diagonal), per leading batch index; NaN where A is not positive
+        definite (as XLA)."""
+        a, (shape, dtype) = ins[0], outs[0]
+        n = shape[-1]
+        ref = self.em.buffer(shape, dtype)
+        batch = int(np.prod(shape[:-2], dtype=np.int64))
+        b, i, j, k, s = (self.em.fresh(p) for p in "bijks")
+        base = f"{b}*{n * n}"
+        for line in [
+            f"for (int {b} = 0; {b} < {batch}; {b}++) {{",
+            f"    for (int {i} = 0; {i} < {n * n}; {i}++) {ref.name}[{base} + {i}] = 0;",
+            f"    for (int {j} = 0; {j} < {n}; {j}++) {{",
+            f"        double {s} = {a.at(f'{base} + {j}*{n} + {j}')};",
+            f"        for (int {k} = 0; {k} < {j}; {k}++) {s} -= {ref.name}[{base} + {j}*{n} + {k}] * "
+            f"{ref.name}[{base} + {j}*{n} + {k}];",
+            f"        {ref.name}[{base} + {j}*{n} + {j}] = sqrt({s});",
+            f"        for (int {i} = {j} + 1; {i} < {n}; {i}++) {{",
+            f"            double t_ = {a.at(f'{base} + {i}*{n} + {j}')};",
+            f"            for (int {k} = 0; {k} < {j}; {k}++) t_ -= {ref.name}[{base} + {i}*{n} + {k}] * "
+            f"{ref.name}[{base} + {j}*{n} + {k}];",
+            f"            {ref.name}[{base} + {i}*{n} + {j}] = t_ / {ref.name}[{base} + {j}*{n} + {j}];",
+            "        }",
+            "    }",
+            "}",
+        ]:
+            self.em.emit(line)
+        return ref
+
+    def p_triangular_solve(self, ins: list[Ref], outs: list, left_side: bool, lower: bool, transpose_a: bool,
+                           unit_diagonal: bool, conjugate_a: bool = False, **_: Any) -> Ref:
+        """X with op(A) X = B (left_side) or X op(A) = B, op(A) = A or Aᵀ, A triangular; per leading batch index."""
+        a, b, (shape, _) = ins[0], ins[1], outs[0]
+        n = a.shape[-1]
+        ref = self.copy(b)
+        m, r = shape[-2], shape[-1]
+        batch = int(np.prod(shape[:-2], dtype=np.int64))
+        # the system is solved column by column of X (left) or row by row (right: X op(A) = B ⇔ op(A)ᵀ Xᵀ = Bᵀ)
+        effective_lower = lower != transpose_a  # op(A) lower triangular?
+        transposed = transpose_a
+        if not left_side:
+            effective_lower, transposed = not effective_lower, not transpose_a
+        count, stride_e, stride_c = (r, r, 1) if left_side else (m, 1, r)  # elements of one system: stride_e apart
+        bi, c, i, k, s = (self.em.fresh(p) for p in "bciks")
+
+        def A(row: str, col: str) -> str:  # element of the matrix M = op(A) or op(A)ᵀ actually solved: M x = y
+            return a.at(f"{bi}*{n * n} + ({col})*{n} + ({row})" if transposed else f"{bi}*{n * n} + ({row})*{n} + ({col})")
+
+        order = f"int {i} = 0; {i} < {n}; {i}++" if effective_lower else f"int {i} = {n - 1}; {i} >= 0; {i}--"
+        inner = f"int {k} = 0; {k} < {i}; {k}++" if effective_lower else f"int {k} = {i} + 1; {k} < {n}; {k}++"
+        x = f"{ref.name}[{bi}*{m * r} + {c}*{stride_c} + ({{}})*{stride_e}]"
+        for line in [
+            f"for (int {bi} = 0; {bi} < {batch}; {bi}++) for (int {c} = 0; {c} < {count}; {c}++) {{",
+            f"    for ({order}) {{",
+            f"        double {s} = {x.format(i)};",
+            f"        for ({inner}) {s} -= {A(i, k)} * {x.format(k)};",
+            f"        {x.format(i)} = {s if unit_diagonal else f'{s} / {A(i, i)}'};",
+            "    }",
+            "}",
+        ]:
+            self.em.emit(line)
+        return ref
+
+    def p_lu(self, ins: list[Ref], outs: list, **_: Any) -> list[Ref]:
+        """P A = L U with partial pivoting (LAPACK getrf: the largest |a| first): the packed LU, the pivots (row
+        swapped with at each step) and the permutation."""
+        a = ins[0]
+        (shape, dtype), (pshape, pdtype), (qshape, qdtype) = outs
+        n = shape[-1]
+        if len(shape) != 2 or shape[0] != n:
+            raise Unsupported("LU of a batched or non-square matrix")
+        lu, piv, perm = self.copy(a), self.em.buffer(pshape, pdtype), self.em.buffer(qshape, qdtype)
+        i, j, k, p = (self.em.fresh(x) for x in "ijkp")
+        for line in [
+            f"for (int {i} = 0; {i} < {n}; {i}++) {perm.name}[{i}] = {i};",
+            f"for (int {k} = 0; {k} < {n}; {k}++) {{",
+            f"    int {p} = {k};",
+            f"    for (int {i} = {k} + 1; {i} < {n}; {i}++) if (fabs({lu.name}[{i}*{n} + {k}]) > "
+            f"fabs({lu.name}[{p}*{n} + {k}])) {p} = {i};",
+            f"    {piv.name}[{k}] = {p};",
+            f"    if ({p} != {k}) {{",
+            f"        for (int {j} = 0; {j} < {n}; {j}++) {{ double t_ = {lu.name}[{k}*{n} + {j}]; "
+            f"{lu.name}[{k}*{n} + {j}] = {lu.name}[{p}*{n} + {j}]; {lu.name}[{p}*{n} + {j}] = t_; }}",
+            f"        {{ {perm.ctype} t_ = {perm.name}[{k}]; {perm.name}[{k}] = {perm.name}[{p}]; "
+            f"{perm.name}[{p}] = t_; }}",
+            "    }",
+            f"    for (int {i} = {k} + 1; {i} < {n}; {i}++) {{",
+            f"        {lu.name}[{i}*{n} + {k}] /= {lu.name}[{k}*{n} + {k}];",
+            f"        for (int {j} = {k} + 1; {j} < {n}; {j}++) {lu.name}[{i}*{n} + {j}] -= "
+            f"{lu.name}[{i}*{n} + {k}] * {lu.name}[{k}*{n} + {j}];",
+            "    }",
+            "}",
+        ]:
+            self.em.emit(line)
+        return [lu, piv, perm]
+
+    def p_sort(self, ins: list[Ref], outs: list, dimension: int, is_stable: bool, num_keys: int, **_: Any) -> list[Ref]:
+        """A stable insertion sort along `dimension` by the first `num_keys` operands (lexicographic), every operand
+        permuted alike."""
+        if num_keys != 1:
+            raise Unsupported("sort by several keys")
+        refs = [self.copy(x) for x in ins]
+        shape = ins[0].shape
+        n = shape[dimension]
+        others = [s if d != dimension else 1 for d, s in enumerate(shape)]
+
+        def body(ix: list[str]) -> list[str]:
+            a, b = self.em.fresh("a"), self.em.fresh("b")
+            at = lambda e: linear(shape, [e if d == dimension else i for d, i in enumerate(ix)])  # noqa: E731
+            key = refs[0].name
+            swap = " ".join(f"{{ {r.ctype} t_ = {r.name}[{at(b)}]; {r.name}[{at(b)}] = {r.name}[{at(f'{b} - 1')}]; "
+                            f"{r.name}[{at(f'{b} - 1')}] = t_; }}" for r in refs)
+            return [f"for (int {a} = 1; {a} < {n}; {a}++)",
+                    f"    for (int {b} = {a}; {b} > 0 && {key}[{at(b)}] < {key}[{at(f'{b} - 1')}]; {b}--) {swap}"]
+
+        self.em.loop(others, body)
+        return refs
+
+
+PRIMITIVES = tuple(sorted({*UNARY, *BINARY, *(name[2:] for name in dir(Translator) if name.startswith("p_"))}))
+
+
+def translate(closed: Any, name: str, arg_names: Sequence[str] | None = None,
+              out_names: Sequence[str] | None = None) -> str:
+    """The C99 text of `static void name(const T *in…, T *out…)` computing the ClosedJaxpr `closed` (module
+    docstring); its constants become static arrays before the function."""
+    jaxpr = closed.jaxpr
+    em = Emitter(tag=name)
+    args = [Ref(arg_names[k] if arg_names else f"in{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name)
+            for k, v in enumerate(jaxpr.invars)]
+    results = Translator(em).run(jaxpr, closed.consts, args)
+    outs = [Ref(out_names[k] if out_names else f"out{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name)
+            for k, v in enumerate(jaxpr.outvars)]
+    for out, value in zip(outs, results, strict=True):  # last: an output may alias an input
+        def copy(ix: list[str], out: Ref = out, value: Ref = value) -> list[str]:
+            return [f"{out.name}[{ix[0]}] = ({out.ctype}){value.at(ix[0])};"]
+
+        em.loop([max(out.size, 1)], copy)
+    params = [f"const {a.ctype} *{a.name}" for a in args] + [f"{o.ctype} *{o.name}" for o in outs]
+    return "\n".join([*em.consts, f"static void {name}({', '.join(params)}) {{", *em.lines, "}", ""])
