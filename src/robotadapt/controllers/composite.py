@@ -84,8 +84,10 @@ class Composite:
 
     def initial_state(self, q0: Array, dq0: Array) -> Array:
         """[φ̂(0), P0, τ_f(0) = 0, Z3(0) = a Y_h(q0, q̇0)]: W_f(0) = 0, so W_f φ = τ_f from the start."""
-        Z3 = self.a * self.model.momentum_regressor(np.asarray(q0, dtype=float), np.asarray(dq0, dtype=float))
-        return np.concatenate([self.phi_hat0, self.P0.reshape(-1), np.zeros(self.model.n), Z3.reshape(-1)])
+        xp = array_namespace(q0, dq0)
+        Z3 = self.a * self.model.momentum_regressor(xp.asarray(q0, dtype=xp.float64), xp.asarray(dq0, dtype=xp.float64))
+        return xp.concatenate([xp.asarray(self.phi_hat0), xp.asarray(self.P0.reshape(-1)), xp.zeros(self.model.n),
+                               xp.reshape(Z3, (-1,))])
 
     def phi_hat(self, x: Array) -> Array:
         return x[..., : self.model.p]

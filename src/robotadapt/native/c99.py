@@ -215,14 +215,31 @@ BINARY: dict[str, Callable[[str, str, Ref], str]] = {
 }
 
 
+def live(jaxpr: Any, used: Sequence[bool] | None = None) -> list[tuple[Any, list[bool]]]:
+    """The equations the `used` outputs (default all) depend on, in order, each with which of its outputs are read (a
+    traced program keeps values nothing reads, and C warns of them)."""
+    needed = {v for k, v in enumerate(jaxpr.outvars) if not hasattr(v, "val") and (used is None or used[k])}
+    kept = []
+    for eqn in reversed(jaxpr.eqns):
+        mask = [v in needed for v in eqn.outvars]
+        if eqn.effects or any(mask):
+            kept.append((eqn, mask))
+            needed.update(v for v in eqn.invars if not hasattr(v, "val"))
+    return kept[::-1]
+
+
+UNUSED = Ref("0", (), "float64", scalar_expr=True)  # an output nothing reads
+
+
 class Translator:
     """Translates one jaxpr (with its constants) into statements of an :class:`Emitter`."""
 
     def __init__(self, em: Emitter) -> None:
         self.em = em
+        self.used: list[bool] = []  # which outputs of the equation being translated are read
 
-    def run(self, jaxpr: Any, consts: Sequence[Any], args: Sequence[Ref]) -> list[Ref]:
-        """The output values of `jaxpr` on `args`, its constvars bound to `consts`."""
+    def run(self, jaxpr: Any, consts: Sequence[Any], args: Sequence[Ref], used: Sequence[bool] | None = None) -> list[Ref]:
+        """The output values of `jaxpr` on `args`, its constvars bound to `consts` (those not `used`: :data:`UNUSED`)."""
         env: dict[Any, Ref] = {}
         for var, value in zip(jaxpr.constvars, consts, strict=True):
             env[var] = value if isinstance(value, Ref) else self.em.constant(value)
@@ -234,11 +251,12 @@ class Translator:
                 return self.em.constant(np.asarray(atom.val, dtype=atom.aval.dtype))
             return env[atom]
 
-        for eqn in jaxpr.eqns:
+        for eqn, mask in live(jaxpr, used):
+            self.used = mask
             outs = self.equation(eqn, [read(a) for a in eqn.invars])
             for var, ref in zip(eqn.outvars, outs, strict=True):
                 env[var] = ref
-        return [read(v) for v in jaxpr.outvars]
+        return [read(v) if used is None or used[k] else UNUSED for k, v in enumerate(jaxpr.outvars)]
 
     def equation(self, eqn: Any, ins: list[Ref]) -> list[Ref]:
         name = eqn.primitive.name
@@ -288,7 +306,7 @@ class Translator:
     def call(self, closed: Any, ins: Sequence[Ref]) -> list[Ref]:
         jaxpr = getattr(closed, "jaxpr", closed)
         consts = getattr(closed, "consts", [])
-        return Translator(self.em).run(jaxpr, consts, ins)
+        return Translator(self.em).run(jaxpr, consts, ins, self.used)
 
     # -- shape and data movement --------------------------------------------------------------------------------------
 
@@ -366,11 +384,11 @@ class Translator:
 
     def p_split(self, ins: list[Ref], outs: list, sizes: Sequence[int], axis: int, **_: Any) -> list[Ref]:
         x, result, offset = ins[0], [], 0
-        for shape, dtype in outs:
+        for (shape, dtype), used in zip(outs, self.used, strict=True):
             def source(ix: list[str], offset: int = offset) -> str:
                 return x.at(linear(x.shape, [f"{i} + {offset}" if d == axis else i for d, i in enumerate(ix)]))
 
-            result.append(self.gathered(shape, dtype, source))
+            result.append(self.gathered(shape, dtype, source) if used else UNUSED)
             offset += shape[axis]
         return result
 
