@@ -3,21 +3,27 @@
 For the two-link arm (Example 6.3.1), the PUMA 560 and the Panda (Slotine–Li, Table 6.3.1): `reset` at the desired
 start, then `step(t, q, dq)` every tick with the desired state plus a small error as the measurement, as a driver's
 1 kHz callback would call it (no plant: the controller alone). Each call is timed with `perf_counter_ns`, the garbage
-collector off, as in a real-time loop; prints p50, p99 and max per arm and backend as a markdown table, the goal of the
-compiled step (p99 ≤ 50 µs, max ≤ 500 µs; issue 22) and the machine's load average before and after (other processes
-on the same cores show up in p99 and max). The compiled backend takes `STEPS` steps; the numpy one, 5–50 times slower,
-a tenth of them.
+collector off, as in a real-time loop; prints p50, p99 and max per arm and backend as a markdown table, the goals
+(issue 22: the compiled step p99 ≤ 50 µs, max ≤ 500 µs; issue 28: through RealtimeController's C backend p99 ≤ 15 µs
+two-link, ≤ 30 µs Panda) and the machine's load average before and after (other processes on the same cores show up in
+p99 and max). The "C from C" row times the exported `ra_step` inside a C program (`clock_gettime` around each call,
+the inputs read beforehand; goal p99 ≤ 5 µs two-link, ≤ 20 µs Panda): what a robot's callback pays. The compiled
+backends take `STEPS` steps; the numpy one, 5–50 times slower, a tenth of them.
 """
 
 from __future__ import annotations
 
 import gc
 import os
+import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
+from robotadapt.native.build import require_compiler
 from robotadapt.realtime import RealtimeController
 
 STEPS = 100_000
@@ -45,6 +51,49 @@ def latencies(scenario: str, backend: str, steps: int) -> np.ndarray:
     return out / 1e3
 
 
+TIMER = r"""
+#define _POSIX_C_SOURCE 199309L
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+#include "ra.h"
+int main(int argc, char **argv) {
+    long steps = atol(argv[1]);
+    int n = ra_n();
+    double *rows = malloc(steps * (1 + 2 * n) * sizeof(double)), *state = malloc(ra_state_size() * sizeof(double));
+    double tau[64];
+    for (long i = 0; i < steps * (1 + 2 * n); i++) if (scanf("%lf", &rows[i]) != 1) return 1;
+    ra_reset(state, rows + 1, rows + 1 + n);
+    for (long k = 0; k < steps; k++) {
+        double *r = rows + k * (1 + 2 * n);
+        struct timespec a, b;
+        clock_gettime(CLOCK_MONOTONIC, &a);
+        ra_step(state, r[0], r + 1, r + 1 + n, tau);
+        clock_gettime(CLOCK_MONOTONIC, &b);
+        printf("%ld\n", (b.tv_sec - a.tv_sec) * 1000000000L + (b.tv_nsec - a.tv_nsec));
+    }
+    return 0;
+}
+"""
+
+
+def c_latencies(scenario: str, steps: int) -> np.ndarray:
+    """The time of each of `steps` calls of the exported ra_step inside a C program, µs."""
+    cc = require_compiler("bench")
+    ctrl = RealtimeController.from_scenario(scenario, backend="numpy")
+    t = ctrl.Ts * np.arange(steps)
+    ref = ctrl.trajectory(t)
+    rows = np.column_stack([t, ref.q_des + 1e-3 * np.sin(t)[:, None], ref.dq_des + 1e-3 * np.cos(t)[:, None]])
+    code = ctrl.export("ra")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, text in (("ra.h", code.header), ("ra.c", code.source), ("timer.c", TIMER)):
+            (Path(tmp) / name).write_text(text)
+        subprocess.run([cc, "-O2", "-o", "timer", "timer.c", "ra.c", "-lm"], cwd=tmp, check=True)
+        text = "\n".join(" ".join(f"{v:.17g}" for v in r) for r in rows)
+        done = subprocess.run(["./timer", str(steps)], cwd=tmp, input=text, capture_output=True, text=True, check=True)
+    return np.array(done.stdout.split(), dtype=float) / 1e3
+
+
 def main() -> int:
     steps = int(sys.argv[1]) if len(sys.argv) > 1 else STEPS
     print(f"step latency over {steps} steps (numpy: {steps // 10}); load average {os.getloadavg()[0]:.2f} on "
@@ -52,8 +101,8 @@ def main() -> int:
     print("| arm | backend | p50 (µs) | p99 (µs) | max (µs) |")
     print("|---|---|---|---|---|")
     for name, scenario in ARMS:
-        for backend, count in (("jax", steps), ("numpy", steps // 10)):
-            lat = latencies(scenario, backend, count)
+        for backend, count in (("C from C", steps), ("c", steps), ("jax", steps), ("numpy", steps // 10)):
+            lat = c_latencies(scenario, count) if backend == "C from C" else latencies(scenario, backend, count)
             p50, p99 = np.percentile(lat, [50, 99])
             print(f"| {name} | {backend} | {p50:.1f} | {p99:.1f} | {lat.max():.0f} |", flush=True)
     print(f"load average at the end: {os.getloadavg()[0]:.2f}")
