@@ -5,12 +5,18 @@ from __future__ import annotations
 
 import argparse
 import json
+from functools import partial
 import subprocess
 import tempfile
 import time
 from pathlib import Path
+from typing import IO
 
 from ..validation import ConfigError
+
+
+def _write(text: str, f: IO[str]) -> None:
+    f.write(text)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -51,7 +57,7 @@ def main(args: argparse.Namespace) -> int:
         compiled = time.perf_counter() - clock
     out = writable_dir(args.out if args.out is not None else Path("results") / f"export-{name}")
     for file, text in files.items():
-        atomic_write(out / file, lambda f, text=text: f.write(text))
+        atomic_write(out / file, partial(_write, text))
     record = {"scenario": name, "prefix": prefix, "joints": code.n, "state_size": code.state_size,
               "control_period": ctrl.Ts, "primitives": code.primitives, "files": list(files),
               "build": [line.replace(cc, "cc") for line in build], "translate_seconds": translated,
