@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import argparse
 import json
-from functools import partial
 import subprocess
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 from typing import IO
 
