@@ -65,6 +65,44 @@ def test_each_primitive_equals_jax(name):
 
 
 def test_a_primitive_the_translator_lacks_is_named():
-    with pytest.raises(Unsupported, match="no primitive 'while'"):
-        compiled(lambda x: jax.lax.while_loop(lambda c: c < 10.0, lambda c: c * 2.0, x), 1.0)
-    assert {"dot_general", "scatter", "cholesky", "triangular_solve", "cumsum", "select_n"} <= set(PRIMITIVES)
+    with pytest.raises(Unsupported, match="no primitive 'eigh'"):
+        compiled(lambda m: jnp.linalg.eigh(m)[0], SPD)
+    assert {"dot_general", "scatter", "cholesky", "triangular_solve", "cumsum", "select_n", "while", "scan"} <= set(
+        PRIMITIVES)
+
+
+def test_control_flow_equals_jax():
+    """while (fori_loop with a traced count), scan (forward and reversed, with outputs) and cond."""
+    def fn(x, n):
+        a = jax.lax.fori_loop(0, n, lambda i, c: c * 0.5 + jnp.sin(c) + i, x)
+        b, ys = jax.lax.scan(lambda c, y: (c + y, (c * y, c - y)), x, jnp.stack([x, 2 * x, 3 * x]))
+        c, zs = jax.lax.scan(lambda c, y: (c * 2 + y, c), x[0], x, reverse=True)
+        d = jax.lax.cond(x[0] > 0, lambda v: v + 1, lambda v: v * v, x)
+        e = jax.lax.switch(n - 2, [lambda v: v, lambda v: -v, lambda v: 2 * v], x)
+        return a, b, ys, c, zs, d, e
+
+    x = RNG.normal(size=3)
+    with jax.enable_x64(True):
+        expected = jax.tree_util.tree_leaves(fn(jnp.asarray(x), 3))
+        got = compiled(fn, x, np.int64(3))(x, np.int64(3))
+    for g, e in zip(got, expected, strict=True):
+        np.testing.assert_allclose(g, np.asarray(e), rtol=1e-12, atol=1e-14)
+
+
+def test_batched_lu_solves_equal_jax():
+    m = np.stack([SPD, 2 * SPD + np.eye(3)])
+    b = RNG.normal(size=(2, 3))
+    with jax.enable_x64(True):
+        fn = lambda m, b: jnp.linalg.solve(m, b[..., None])[..., 0]  # noqa: E731
+        np.testing.assert_allclose(compiled(fn, m, b)(m, b)[0], np.asarray(fn(m, b)), rtol=1e-12)
+
+
+def test_batched_gather_and_scatter_equal_jax():
+    """vmap of indexing: gather and scatter with batching dimensions."""
+    x, i = RNG.normal(size=(3, 4)), np.array([2, 0, 3])
+    fn = jax.vmap(lambda row, k: (row[k], row.at[k].set(-1.0), row.at[k].add(5.0)))
+    with jax.enable_x64(True):
+        expected = jax.tree_util.tree_leaves(fn(jnp.asarray(x), jnp.asarray(i)))
+        got = compiled(fn, x, i)(x, i)
+    for g, e in zip(got, expected, strict=True):
+        np.testing.assert_allclose(g, np.asarray(e), rtol=1e-12)

@@ -565,12 +565,11 @@ class Translator:
                  fill_value: Any = None, **_: Any) -> Ref:
         x, indices, (shape, dtype) = ins[0], ins[1], outs[0]
         dn = dimension_numbers
-        if dn.operand_batching_dims:
-            raise Unsupported("gather with batching dimensions")
         offset_dims, collapsed, start_map = list(dn.offset_dims), list(dn.collapsed_slice_dims), list(dn.start_index_map)
+        batching = dict(zip(dn.operand_batching_dims, dn.start_indices_batching_dims, strict=True))
         index_dim = len(indices.shape) - 1
         fill = "FILL_OR_DROP" in str(mode)
-        window = [d for d in range(len(x.shape)) if d not in collapsed]
+        window = [d for d in range(len(x.shape)) if d not in collapsed and d not in batching]
         ref = self.em.buffer(shape, dtype)
 
         def body(ix: list[str]) -> list[str]:
@@ -579,7 +578,9 @@ class Translator:
             lines, at, inside = [], [], []
             for d in range(len(x.shape)):
                 o = offs.get(d, "0")
-                if d in start_map:
+                if d in batching:  # the operand's batch index is the indices' (index_vector_dim is last)
+                    at.append(batch[batching[d]])
+                elif d in start_map:
                     s = self.em.fresh("o")
                     raw = self._window_start(indices, batch, index_dim, start_map.index(d))
                     limit = x.shape[d] - slice_sizes[d]
@@ -602,14 +603,13 @@ class Translator:
     def _scatter(self, ins: list[Ref], outs: list, dimension_numbers: Any, mode: Any, combine: str) -> Ref:
         x, indices, updates = ins[0], ins[1], ins[2]
         dn = dimension_numbers
-        if dn.operand_batching_dims:
-            raise Unsupported("scatter with batching dimensions")
         window_dims, inserted, to_operand = list(dn.update_window_dims), list(dn.inserted_window_dims), list(
             dn.scatter_dims_to_operand_dims)
+        batching = dict(zip(dn.operand_batching_dims, dn.scatter_indices_batching_dims, strict=True))
         index_dim = len(indices.shape) - 1
         drop = "FILL_OR_DROP" in str(mode) or "PROMISE" not in str(mode) and "CLIP" not in str(mode)
         ref = self.copy(x)
-        window = [d for d in range(len(x.shape)) if d not in inserted]
+        window = [d for d in range(len(x.shape)) if d not in inserted and d not in batching]
         window_size = {window[j]: updates.shape[d] for j, d in enumerate(window_dims)}
 
         def body(ix: list[str]) -> list[str]:
@@ -618,7 +618,9 @@ class Translator:
             lines, at, inside = [], [], []
             for d in range(len(x.shape)):
                 o = offs.get(d, "0")
-                if d in to_operand:
+                if d in batching:
+                    at.append(batch[batching[d]])
+                elif d in to_operand:
                     s = self.em.fresh("o")
                     raw = self._window_start(indices, batch, index_dim, to_operand.index(d))
                     limit = x.shape[d] - window_size.get(d, 1)
@@ -672,6 +674,71 @@ class Translator:
         start = sum(lengths[:2])
         consts, b = ins[start : start + lengths[2]], ins[sum(lengths):]
         return self.call(jaxprs.solve, [*consts, *b])
+
+    # -- control flow -------------------------------------------------------------------------------------------------
+
+    def _assign(self, targets: Sequence[Ref], values: Sequence[Ref]) -> None:
+        """targets ← values, every value read before any target is written (a value may alias another target)."""
+        staged = [self.copy(v) for v in values]
+        for target, value in zip(targets, staged, strict=True):
+            self.em.loop([max(target.size, 1)], lambda ix, t=target, v=value: [f"{t.name}[{ix[0]}] = {v.at(ix[0])};"])
+
+    def _block(self, opening: str, fill: Callable[[], None]) -> None:
+        self.em.emit(opening)
+        self.em.depth += 1
+        fill()
+        self.em.depth -= 1
+        self.em.emit("}")
+
+    def p_while(self, ins: list[Ref], outs: list, cond_jaxpr: Any, body_jaxpr: Any, cond_nconsts: int,
+                body_nconsts: int, **_: Any) -> list[Ref]:
+        """`for (;;)`: the condition on the carry, break when false, the body, the carry replaced."""
+        cond_consts, body_consts = ins[:cond_nconsts], ins[cond_nconsts : cond_nconsts + body_nconsts]
+        carry = [self.copy(r) for r in ins[cond_nconsts + body_nconsts :]]
+
+        def fill() -> None:
+            pred = Translator(self.em).run(cond_jaxpr.jaxpr, cond_jaxpr.consts, [*cond_consts, *carry])[0]
+            self.em.emit(f"if (!({pred.at('0')})) break;")
+            self._assign(carry, Translator(self.em).run(body_jaxpr.jaxpr, body_jaxpr.consts, [*body_consts, *carry]))
+
+        self._block("for (;;) {", fill)
+        return carry
+
+    def p_scan(self, ins: list[Ref], outs: list, jaxpr: Any, length: int, reverse: bool, num_consts: int,
+               num_carry: int, **_: Any) -> list[Ref]:
+        """A loop of `length` iterations: the body on the consts, the carry and the i-th slices of xs; the carry
+        replaced, the i-th slices of ys written."""
+        consts, xs = ins[:num_consts], ins[num_consts + num_carry :]
+        carry = [self.copy(r) for r in ins[num_consts : num_consts + num_carry]]
+        ys = [self.em.buffer(shape, dtype) for shape, dtype in outs[num_carry:]]
+        it, at = self.em.fresh("t"), self.em.fresh("j")
+
+        def fill() -> None:
+            self.em.emit(f"const int64_t {at} = {f'{length - 1} - {it}' if reverse else it};")
+            slices = [Ref(f"({x.name} + {at}*{max(int(np.prod(x.shape[1:])), 1)})", x.shape[1:], x.dtype) for x in xs]
+            new = Translator(self.em).run(jaxpr.jaxpr, jaxpr.consts, [*consts, *carry, *slices])
+            for y, value in zip(ys, new[num_carry:], strict=True):  # before the carry moves: a y may alias it
+                size = max(int(np.prod(y.shape[1:])), 1)
+                self.em.loop([size], lambda ix, y=y, v=value, size=size: [
+                    f"{y.name}[{at}*{size} + {ix[0]}] = {v.at(ix[0])};"])
+            self._assign(carry, new[:num_carry])
+
+        self._block(f"for (int64_t {it} = 0; {it} < {int(length)}; {it}++) {{", fill)
+        return [*carry, *ys]
+
+    def p_cond(self, ins: list[Ref], outs: list, branches: Sequence[Any], **_: Any) -> list[Ref]:
+        """The branch of the (clamped) index, its outputs copied into buffers declared before."""
+        index, operands = ins[0].at("0"), ins[1:]
+        results = [self.em.buffer(shape, dtype) for shape, dtype in outs]
+        for k, branch in enumerate(branches):
+            test = f"if (({index}) <= 0) {{" if k == 0 else f"}} else if (({index}) == {k}) {{" if k < len(
+                branches) - 1 else "} else {"
+            self.em.emit(test)
+            self.em.depth += 1
+            self._assign(results, Translator(self.em).run(branch.jaxpr, branch.consts, operands))
+            self.em.depth -= 1
+        self.em.emit("}")
+        return results
 
     # -- small dense linear algebra -----------------------------------------------------------------------------------
 
@@ -744,28 +811,30 @@ class Translator:
         a = ins[0]
         (shape, dtype), (pshape, pdtype), (qshape, qdtype) = outs
         n = shape[-1]
-        if len(shape) != 2 or shape[0] != n:
-            raise Unsupported("LU of a batched or non-square matrix")
+        if shape[-2] != n:
+            raise Unsupported("LU of a non-square matrix")
+        batch = int(np.prod(shape[:-2], dtype=np.int64))
         lu, piv, perm = self.copy(a), self.em.buffer(pshape, pdtype), self.em.buffer(qshape, qdtype)
-        i, j, k, p = (self.em.fresh(x) for x in "ijkp")
+        b, i, j, k, p = (self.em.fresh(x) for x in "bijkp")
+        A = lambda r, c: f"{lu.name}[{b}*{n * n} + ({r})*{n} + ({c})]"  # noqa: E731
+        P = lambda r: f"{perm.name}[{b}*{n} + ({r})]"  # noqa: E731
         for line in [
-            f"for (int {i} = 0; {i} < {n}; {i}++) {perm.name}[{i}] = {i};",
+            f"for (int {b} = 0; {b} < {batch}; {b}++) {{",
+            f"for (int {i} = 0; {i} < {n}; {i}++) {P(i)} = {i};",
             f"for (int {k} = 0; {k} < {n}; {k}++) {{",
             f"    int {p} = {k};",
-            f"    for (int {i} = {k} + 1; {i} < {n}; {i}++) if (fabs({lu.name}[{i}*{n} + {k}]) > "
-            f"fabs({lu.name}[{p}*{n} + {k}])) {p} = {i};",
-            f"    {piv.name}[{k}] = {p};",
+            f"    for (int {i} = {k} + 1; {i} < {n}; {i}++) if (fabs({A(i, k)}) > fabs({A(p, k)})) {p} = {i};",
+            f"    {piv.name}[{b}*{n} + {k}] = {p};",
             f"    if ({p} != {k}) {{",
-            f"        for (int {j} = 0; {j} < {n}; {j}++) {{ double t_ = {lu.name}[{k}*{n} + {j}]; "
-            f"{lu.name}[{k}*{n} + {j}] = {lu.name}[{p}*{n} + {j}]; {lu.name}[{p}*{n} + {j}] = t_; }}",
-            f"        {{ {perm.ctype} t_ = {perm.name}[{k}]; {perm.name}[{k}] = {perm.name}[{p}]; "
-            f"{perm.name}[{p}] = t_; }}",
+            f"        for (int {j} = 0; {j} < {n}; {j}++) {{ double t_ = {A(k, j)}; {A(k, j)} = {A(p, j)}; "
+            f"{A(p, j)} = t_; }}",
+            f"        {{ {perm.ctype} t_ = {P(k)}; {P(k)} = {P(p)}; {P(p)} = t_; }}",
             "    }",
             f"    for (int {i} = {k} + 1; {i} < {n}; {i}++) {{",
-            f"        {lu.name}[{i}*{n} + {k}] /= {lu.name}[{k}*{n} + {k}];",
-            f"        for (int {j} = {k} + 1; {j} < {n}; {j}++) {lu.name}[{i}*{n} + {j}] -= "
-            f"{lu.name}[{i}*{n} + {k}] * {lu.name}[{k}*{n} + {j}];",
+            f"        {A(i, k)} /= {A(k, k)};",
+            f"        for (int {j} = {k} + 1; {j} < {n}; {j}++) {A(i, j)} -= {A(i, k)} * {A(k, j)};",
             "    }",
+            "}",
             "}",
         ]:
             self.em.emit(line)
