@@ -213,6 +213,8 @@ BINARY: dict[str, Callable[[str, str, Ref], str]] = {
     "or": lambda a, b, r: f"({a}) || ({b})" if r.dtype == "bool" else f"({a}) | ({b})",
     "xor": lambda a, b, r: f"({a}) != ({b})" if r.dtype == "bool" else f"({a}) ^ ({b})",
 }
+# the total-order comparisons (sorting keys): the plain ones, which agree with them on every number but signed zeros
+BINARY.update({f"{op}_to": BINARY[op] for op in ("eq", "lt", "le")})
 
 
 def live(jaxpr: Any, used: Sequence[bool] | None = None) -> list[tuple[Any, list[bool]]]:
