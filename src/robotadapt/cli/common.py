@@ -18,9 +18,10 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dt", type=float, help="shorthand for --set simulation.dt=DT")
     parser.add_argument("--control-period", type=float, metavar="T_S",
                         help="shorthand for --set simulation.control_period=T_S: sampled-data control at 1/T_S Hz")
-    parser.add_argument("--backend", choices=("auto", "numpy", "jax"),
+    parser.add_argument("--backend", choices=("auto", "numpy", "jax", "c"),
                         help="shorthand for --set simulation.backend=NAME: 'jax' compiles the loop, 'numpy' steps it "
-                             "in Python, 'auto' (the scenario's default) compiles all but short runs")
+                             "in Python, 'c' translates the compiled loop to C (the system's compiler; fixed-step and "
+                             "sampled runs), 'auto' (the scenario's default) compiles all but short runs")
 
 
 def overrides(args: argparse.Namespace) -> list[str]:

@@ -7,7 +7,9 @@ and :func:`drive` runs it, once for every mode: it feeds the inputs a chunk at a
 stops each run where its verdict says (the divergence guard, a law's own guard) and builds each run's status. Step n
 (t_final) is recorded, not stepped. Under it two loops run the same transition and the same bookkeeping
 (:func:`_judge`): a Python loop (numpy: the readable reference, and plants stepped on the host such as MuJoCo's) and
-`lax.scan` under `jax.jit` (JAX, float64). The checkpointed form for gradients is :mod:`robotadapt.sim.gradient`.
+`lax.scan` under `jax.jit` (JAX, float64) — or the very program that scan is, traced once and translated to C
+(:mod:`robotadapt.native`; backend "c": no per-kernel dispatch, one native call per chunk). The checkpointed form for
+gradients is :mod:`robotadapt.sim.gradient`.
 
 Runs: one transition stepping every run on leading run axes (`stacked`: a batch merged by
 :func:`robotadapt.sim.batch.stack`), or N transitions of one shape (`mapped`): numpy steps them one by one, JAX maps one
@@ -236,14 +238,35 @@ def _axes(mapped: Any) -> Any:
     return 0 if mapped else None
 
 
+NATIVE: dict[Any, tuple[Any, Any, Any]] = {}  # C programs by (JAX program, argument shapes): (program, native, tree)
+
+
+def _native(program: Any, *args: Any) -> Any:
+    """`program(*args)` run as C: its jaxpr on these shapes translated and built once (:mod:`robotadapt.native`)."""
+    from ..native.build import Compiled
+
+    jax = jax_module()
+    leaves, _ = jax.tree_util.tree_flatten(args)
+    key = (id(program), tuple((np.shape(a), np.asarray(a).dtype.str) for a in leaves))
+    if key not in NATIVE:
+        closed = jax.make_jaxpr(program)(*args)
+        tree = jax.tree_util.tree_structure(jax.eval_shape(program, *args))
+        if len(NATIVE) >= MAX_PROGRAMS:
+            NATIVE.pop(next(iter(NATIVE)))
+        NATIVE[key] = (program, Compiled(closed, "chunk"), tree)
+    _, native, tree = NATIVE[key]
+    return jax.tree_util.tree_unflatten(tree, native(*leaves))
+
+
 @float64
 def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
-          mapped: Any) -> tuple[Any, Array, Array, Array, Any]:
+          mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any]:
     """The compiled loop: :func:`_python`'s results, from `lax.scan` over blocks of steps (`mapped`: the runs'
-    transitions vmapped; None: one `transition`, on leading run axes or none). Tracing that meets code needing
-    concrete values (numpy-only code) is a ConfigError naming `simulation.backend` and the law."""
+    transitions vmapped; None: one `transition`, on leading run axes or none), run by XLA or, `native`, as C. Tracing
+    that meets code needing concrete values (numpy-only code) is a ConfigError naming `simulation.backend` and the
+    law."""
     try:
-        return _compiled(runs, transition, carry, feed, n, log_every, mapped)
+        return _compiled(runs, transition, carry, feed, n, log_every, mapped, native)
     except ConfigError:
         raise
     except Exception as exc:  # tracing met code that needs concrete values
@@ -254,7 +277,7 @@ def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, 
 
 
 def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
-              mapped: Any) -> tuple[Any, Array, Array, Array, Any]:
+              mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any]:
     jax = jax_module()
     jnp = jax.numpy
     if mapped is not None:
@@ -288,7 +311,7 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
                   feed(first * log_every, real))  # the padding: zeros, with its step indices after n (not computed)
         xs = xs._replace(k=np.arange(first * log_every, first * log_every + size))
         xs = _blocked(xs, mapped, per_call, log_every)
-        state, (record, ok) = program(arrays, state, xs, n)
+        state, (record, ok) = _native(program, arrays, state, xs, n) if native else program(arrays, state, xs, n)
         move = partial(_rows, keep=min(per_call, blocks - first), runs_first=mapped is not None)
         records.append(map_tree(move, record))
         valid.append(move(ok))
@@ -339,23 +362,24 @@ def drive(runs: Sequence[Any], carries: Sequence[Any], feed: Feed, n: int, log_e
     `runs`: each run's transition (what words its status); `carries`: each run's carry before step 0. `stacked`: (one
     transition, its carry) stepping all the runs at once on a leading run axis; else the runs are mapped. `feed(first,
     count)`: the inputs of those steps for every run, leaves marked True in `mapped` (a prefix of the inputs' tuples)
-    holding the runs on axis 1, the others shared. `backend`: "numpy" (the Python loop) or "jax" (`lax.scan`)."""
+    holding the runs on axis 1, the others shared. `backend`: "numpy" (the Python loop), "jax" (`lax.scan`) or "c"
+    (that program as C)."""
     N = len(runs)
     listed = False
     if stacked is not None or N == 1:
         transition, carry = stacked if stacked is not None else (runs[0], carries[0])
         one_feed = feed if stacked is not None else (lambda first, count: take_run(feed(first, count), 0, mapped))
-        if backend == "jax":
-            out = _scan(runs, transition, carry, one_feed, n, log_every, None)
+        if backend in ("jax", "c"):
+            out = _scan(runs, transition, carry, one_feed, n, log_every, None, backend == "c")
         else:
             out = _python([(transition, carry)], one_feed, None, n, log_every, progress)
         records, valid, k_stop, why, bad = out
         if stacked is None:  # a single run: a run axis of one
             records, valid = map_tree(lambda a: a[:, None], records), valid[:, None]
             k_stop, why, bad = k_stop[None], why[None], map_tree(lambda a: a[None], bad)
-    elif backend == "jax":
+    elif backend in ("jax", "c"):
         records, valid, k_stop, why, bad = _scan(runs, None, map_tree(lambda *a: np.stack(a), *carries), feed, n,
-                                                 log_every, mapped)
+                                                 log_every, mapped, backend == "c")
     else:
         records, valid, k_stop, why, bad = _python(list(zip(runs, carries, strict=True)), feed, mapped, n, log_every,
                                                    progress)

@@ -19,7 +19,7 @@ Array = Any
 T = TypeVar("T")
 
 
-BACKENDS = ("auto", "numpy", "jax")
+BACKENDS = ("auto", "numpy", "jax", "c")
 AUTO_MIN_STEPS = 2000  # "auto" compiles a run of at least this many steps (steps × runs for a batch): below it the
 # numpy loop (≈0.3 ms a step on the two-link arm) finishes before a warm program is traced and loaded (≈0.5 s)
 
@@ -28,6 +28,10 @@ def check_backend(backend: Any) -> str:
     """A valid `simulation.backend` name, else a one-line ConfigError naming the field."""
     if not isinstance(backend, str) or backend not in BACKENDS:
         raise ConfigError("simulation.backend", f"expected one of {', '.join(BACKENDS)}; got {backend!r}")
+    if backend == "c":
+        from ..native.build import require_compiler
+
+        require_compiler("simulation.backend")
     return backend
 
 
@@ -93,6 +97,9 @@ class SolveIVP:
         for name in ("rtol", "atol", "dt"):
             object.__setattr__(self, name, as_scalar(getattr(self, name), f"simulation.{name}", positive=True))
         check_backend(self.backend)
+        if self.backend == "c":
+            raise ConfigError("simulation.backend", "the C backend runs fixed-step and sampled runs (method = 'rk4'); "
+                              "an error-controlled method runs on 'numpy' (scipy) or 'jax' (diffrax)")
 
 
 DISCRETIZATIONS = ("euler", "hold")
