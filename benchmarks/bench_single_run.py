@@ -4,7 +4,8 @@ Problem: Example 6.3.1 (Slotineâ€“Li, Table 6.3.1, on the two-link arm of spec Â
 written out here, with the dynamics coded inline as a user would:
   * numpy + scipy.integrate.solve_ivp (RK45, rtol 1e-6, atol 1e-8);
   * a plain Python fixed-step RK4 loop at 1 kHz.
-robotadapt runs the same problem with `simulate` (RK4, 1 kHz) and with `simulate_batch` for one run. Every method must
+robotadapt runs the same problem with `simulate` (RK4, 1 kHz; backends numpy, jax and c) and with `simulate_batch` for
+one run. Every method must
 reach the plain loop's final state: the fixed-step RK4 runs to round-off (1e-9), RK45 to its tolerance (1e-4 after
 10 s). Prints medians over repeats and speed ratios against both baselines measured in the same run, and the start-up
 cost of importing the library in a fresh interpreter.
@@ -90,6 +91,10 @@ def robotadapt_jax() -> np.ndarray:
     return robotadapt_simulate("jax")
 
 
+def robotadapt_c() -> np.ndarray:
+    return robotadapt_simulate("c")
+
+
 def first_jax_run_seconds() -> tuple[float, float]:
     """Wall time of a fresh process's first compiled run (tracing + compilation + run), with an empty compilation
     cache and then with the cache the first process left on disk."""
@@ -139,8 +144,10 @@ def main() -> None:
             ("plain Python RK4 loop, 1 kHz", naive_rk4, 0.0),
             ("robotadapt simulate, RK4 1 kHz", robotadapt_simulate, 1e-9),
             ("robotadapt simulate_batch, 1 run", robotadapt_batch_of_one, 1e-9),
-            ("robotadapt simulate, backend jax", robotadapt_jax, 1e-9)]
-    robotadapt_jax()  # steady state: the compilation is timed apart below
+            ("robotadapt simulate, backend jax", robotadapt_jax, 1e-9),
+            ("robotadapt simulate, backend c", robotadapt_c, 1e-9)]
+    for warm in (robotadapt_jax, robotadapt_c, robotadapt_jax, robotadapt_c):  # steady state: compilation timed apart
+        warm()
     results = [(name, *timed(fn, 3), tol) for name, fn, tol in rows]
     t_ivp, t_loop, reference = results[0][1], results[1][1], results[1][2]
     print(f"Example 6.3.1, {T_FINAL:g} s simulated, one run (median of 3); speed-up = baseline time / time")

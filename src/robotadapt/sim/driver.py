@@ -278,8 +278,7 @@ def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, 
 
 def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
               mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any]:
-    jax = jax_module()
-    jnp = jax.numpy
+    jnp = np if native else jax_module().numpy  # the C program takes host arrays as they are
     if mapped is not None:
         key = skeleton(runs[0].program_key(), [])
         for other in runs[1:]:
