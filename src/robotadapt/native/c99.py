@@ -683,7 +683,14 @@ class Translator:
         """targets ← values, every value read before any target is written (a value may alias another target)."""
         staged = [self.copy(v) for v in values]
         for target, value in zip(targets, staged, strict=True):
-            self.em.loop([max(target.size, 1)], lambda ix, t=target, v=value: [f"{t.name}[{ix[0]}] = {v.at(ix[0])};"])
+            self._copy_into(target, value, "0", max(target.size, 1))
+
+    def _copy_into(self, target: Ref, value: Ref, offset: str, size: int) -> None:
+        """target[offset + i] = value[i] for i < size."""
+        def body(ix: list[str]) -> list[str]:
+            return [f"{target.name}[{offset} + {ix[0]}] = {value.at(ix[0])};"]
+
+        self.em.loop([size], body)
 
     def _block(self, opening: str, fill: Callable[[], None]) -> None:
         self.em.emit(opening)
@@ -721,8 +728,7 @@ class Translator:
             new = Translator(self.em).run(jaxpr.jaxpr, jaxpr.consts, [*consts, *carry, *slices])
             for y, value in zip(ys, new[num_carry:], strict=True):  # before the carry moves: a y may alias it
                 size = max(int(np.prod(y.shape[1:])), 1)
-                self.em.loop([size], lambda ix, y=y, v=value, size=size: [
-                    f"{y.name}[{at}*{size} + {ix[0]}] = {v.at(ix[0])};"])
+                self._copy_into(y, value, f"{at}*{size}", size)
             self._assign(carry, new[:num_carry])
 
         self._block(f"for (int64_t {it} = 0; {it} < {int(length)}; {it}++) {{", fill)
