@@ -46,6 +46,17 @@ def assert_ticks_equal(got: np.ndarray, want: np.ndarray) -> None:
                                          ("panda-slotine-li", 1000), ("example-7.2.2", 10_000),
                                          ("example-6.6.3", 2000), ("panda-composite", 300)])
 def test_the_export_builds_and_its_harness_gives_the_numpy_torques(tmp_path, capsys, name, ticks):
+    export_and_compare(tmp_path, capsys, name, ticks)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["puma560-slotine-li", "panda-slotine-li", "panda-composite"])
+def test_ten_thousand_ticks_of_the_n_dof_exports(tmp_path, capsys, name):
+    export_and_compare(tmp_path, capsys, name, 10_000)
+
+
+def export_and_compare(tmp_path, capsys, name: str, ticks: int) -> None:
+    """Export `name`, build its harness, feed it `ticks` measurements, compare with the numpy path tick by tick."""
     out = tmp_path / "c"
     assert main(["export", name, "--out", str(out), "--prefix", "ctl"]) == 0
     record = json.loads((out / "export.json").read_text())
