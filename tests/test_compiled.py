@@ -89,7 +89,7 @@ def test_loops_of_one_shape_share_a_program_and_keep_their_own_gains():
 
 
 @pytest.mark.parametrize(("overrides", "message"), [
-    (["simulation.backend='cuda'"], r"^simulation\.backend: expected one of (auto, )?numpy, jax; got 'cuda'"),
+    (["simulation.backend='cuda'"], r"^simulation\.backend: expected one of (auto, )?numpy, jax(, c)?; got 'cuda'"),
     (["simulation.backend='jax'", "simulation.method='RK45'"], r"^simulation\.method: a controller with a delay line"),
 ])
 def test_what_cannot_be_compiled_is_a_clear_error(overrides, message):

@@ -93,7 +93,7 @@ def packed(loop_tick: Tick, trajectory: Trajectory, ravel: Callable[[Any], tuple
 @dataclass(eq=False)
 class RealtimeController:
     """The law of a scenario at a fixed period `Ts` (s), with `reset(q, dq)` and `step(t, q, dq) -> tau` (module
-    docstring). Build one with :meth:`from_scenario`; `backend` "jax", "numpy" or "auto"."""
+    docstring). Build one with :meth:`from_scenario`; `backend` "c", "jax", "numpy" or "auto"."""
 
     loop_tick: Tick
     trajectory: Trajectory

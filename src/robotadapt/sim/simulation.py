@@ -86,8 +86,8 @@ def host_sampling(plant: Plant, integrator: RK4 | SolveIVP | Sampled) -> Sampled
         raise ConfigError("simulation.method", "a MuJoCo plant is stepped by MuJoCo: use method = 'rk4' (the controller "
                           "at every step) or a control_period")
     if integrator.backend in ("jax", "c"):
-        raise ConfigError("simulation.backend", f"a MuJoCo plant is stepped by MuJoCo on the host, not compiled "
-                          f"({integrator.backend!r}): use backend = 'numpy' or 'auto'")
+        raise ConfigError("simulation.backend", "a MuJoCo plant is stepped by MuJoCo on the host, not compiled by "
+                          f"{'JAX' if integrator.backend == 'jax' else 'C'}: use backend = 'numpy' or 'auto'")
     sampled = integrator if isinstance(integrator, Sampled) else Sampled(integrator.dt, integrator.dt)
     timestep = getattr(plant, "timestep", None)  # the host engine's own step, if it sets one
     if timestep is None:
