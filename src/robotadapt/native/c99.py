@@ -41,12 +41,15 @@ class Unsupported(ConfigError):
 
 @dataclass
 class Ref:
-    """A value in C: a buffer `name` (indexed) or, for a scalar literal, an expression `name`; its shape and dtype."""
+    """A value in C: a buffer `name` (indexed), for a scalar literal an expression `name`, or a view — an element
+    expression of the multi-index (`view`: a broadcast, slice, transpose or reversal of another value, never stored) —
+    with its shape and dtype."""
 
     name: str
     shape: tuple[int, ...]
     dtype: str
     scalar_expr: bool = False
+    view: Callable[[list[str]], str] | None = None
 
     @property
     def size(self) -> int:
@@ -56,10 +59,20 @@ class Ref:
     def ctype(self) -> str:
         return c_type(self.dtype)
 
+    def get(self, index: Sequence[str]) -> str:
+        """The element at the multi-index `index` (C expressions, one per dimension)."""
+        if self.scalar_expr:
+            return self.name
+        if self.view is not None:
+            return self.view(list(index))
+        return f"{self.name}[{linear(self.shape, index) if self.shape else '0'}]"
+
     def at(self, index: str) -> str:
         """The element at the flat `index` (a rank-0 value ignores it)."""
         if self.scalar_expr:
             return self.name
+        if self.view is not None:
+            return self.view([f"(({index}) / {s}) % {n}" for s, n in zip(strides(self.shape), self.shape, strict=True)])
         return f"{self.name}[{index if self.shape else '0'}]"
 
 
@@ -111,15 +124,15 @@ def strides(shape: Sequence[int]) -> list[int]:
 def linear(shape: Sequence[int], index: Sequence[str]) -> str:
     """The flat row-major index of the multi-index `index` (C expressions) in `shape`."""
     terms = [f"({e})*{s}" if s != 1 else f"({e})" for e, s, n in zip(index, strides(shape), shape, strict=True)
-             if n != 1]
+             if n != 1]  # a size-1 dimension's index is 0
     return " + ".join(terms) or "0"
 
 
-def broadcast(shape: Sequence[int], index: Sequence[str]) -> str:
-    """The flat index in an operand of `shape` broadcast (numpy's rules: aligned right, size-1 dimensions repeated) to
-    the output position `index`."""
+def broadcast(shape: Sequence[int], index: Sequence[str]) -> list[str]:
+    """The multi-index in an operand of `shape` broadcast (numpy's rules: aligned right, size-1 dimensions repeated)
+    to the output position `index`."""
     tail = list(index[len(index) - len(shape):]) if shape else []
-    return linear(shape, ["0" if n == 1 else i for n, i in zip(shape, tail, strict=True)])
+    return ["0" if n == 1 else i for n, i in zip(shape, tail, strict=True)]
 
 
 @dataclass
@@ -281,20 +294,44 @@ class Translator:
         ct = ref.ctype
 
         def body(ix: list[str]) -> list[str]:
-            flat = linear(shape, ix)
-            args = [r.at(flat if r.shape == shape else broadcast(r.shape, ix)) for r in ins]
-            return [f"{ref.name}[{flat}] = ({ct})({expr(args)});"]
+            args = [r.get(ix if r.shape == shape else broadcast(r.shape, ix)) for r in ins]
+            return [f"{ref.name}[{linear(shape, ix)}] = ({ct})({expr(args)});"]
 
         self.em.loop(shape, body)
         return ref
 
     def alias(self, ref: Ref, out: tuple[tuple[int, ...], str]) -> Ref:
-        """The same elements under another shape (no copy)."""
+        """The same elements under another shape (no copy): a buffer renamed, a view whose dimensions other than size 1
+        are kept re-indexed, another view materialised first."""
+        shape, dtype = out
         if ref.scalar_expr:
-            return Ref(ref.name, out[0], out[1], scalar_expr=True)
-        return Ref(ref.name, out[0], out[1])
+            return Ref(ref.name, shape, dtype, scalar_expr=True)
+        if ref.view is None:
+            return Ref(ref.name, shape, dtype)
+        kept_in = [d for d, n in enumerate(ref.shape) if n != 1]
+        kept_out = [d for d, n in enumerate(shape) if n != 1]
+        if [ref.shape[d] for d in kept_in] != [shape[d] for d in kept_out]:
+            return self.alias(self.materialize(ref), out)
+
+        def view(ix: list[str]) -> str:
+            index = ["0"] * len(ref.shape)
+            for d_in, d_out in zip(kept_in, kept_out, strict=True):
+                index[d_in] = ix[d_out]
+            return ref.get(index)
+
+        return Ref(ref.name, shape, dtype, view=view)
+
+    def materialize(self, ref: Ref) -> Ref:
+        """A buffer holding a view's elements (a buffer or scalar as it is)."""
+        return ref if ref.view is None else self.gathered(ref.shape, ref.dtype, ref.get)
+
+    def viewed(self, x: Ref, out: tuple[tuple[int, ...], str], index: Callable[[list[str]], list[str]]) -> Ref:
+        """A view of `x`: the element at multi-index ix is x's at `index(ix)`."""
+        return Ref(x.name, out[0], out[1], view=lambda ix: x.get(index(ix)))
 
     def copy(self, ref: Ref) -> Ref:
+        if ref.view is not None:
+            return self.materialize(ref)
         out = self.em.buffer(ref.shape, ref.dtype)
         self.em.loop([max(ref.size, 1)], lambda ix: [f"{out.name}[{ix[0]}] = {ref.at(ix[0])};"])
         return out
@@ -337,28 +374,29 @@ class Translator:
     p_reduce_precision = p_copy
 
     def p_broadcast_in_dim(self, ins: list[Ref], outs: list, broadcast_dimensions: Sequence[int], **_: Any) -> Ref:
-        x, (shape, dtype) = ins[0], outs[0]
-        if x.size == int(np.prod(shape)) and not x.scalar_expr:
+        x = ins[0]
+        if x.scalar_expr:
+            return Ref(x.name, outs[0][0], outs[0][1], scalar_expr=True)
+        if x.size == int(np.prod(outs[0][0])):
             return self.alias(x, outs[0])
-        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [
-            "0" if x.shape[j] == 1 else ix[d] for j, d in enumerate(broadcast_dimensions)])))
+        return self.viewed(x, outs[0], lambda ix: ["0" if x.shape[j] == 1 else ix[d]
+                                                   for j, d in enumerate(broadcast_dimensions)])
 
     def p_slice(self, ins: list[Ref], outs: list, start_indices: Sequence[int], strides: Sequence[int] | None = None,
                 **_: Any) -> Ref:
-        x, (shape, dtype) = ins[0], outs[0]
-        step = strides or [1] * len(shape)
-        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [
-            f"{int(s)} + {i}*{int(k)}" for s, i, k in zip(start_indices, ix, step, strict=True)])))
+        step = strides or [1] * len(outs[0][0])
+        return self.viewed(ins[0], outs[0], lambda ix: [
+            f"{int(s)} + ({i})*{int(k)}" if k != 1 else f"{int(s)} + ({i})" if s else i
+            for s, i, k in zip(start_indices, ix, step, strict=True)])
 
     def p_rev(self, ins: list[Ref], outs: list, dimensions: Sequence[int], **_: Any) -> Ref:
-        x, (shape, dtype) = ins[0], outs[0]
-        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [
-            f"{shape[d] - 1} - {i}" if d in dimensions else i for d, i in enumerate(ix)])))
+        shape = outs[0][0]
+        return self.viewed(ins[0], outs[0], lambda ix: [f"{shape[d] - 1} - ({i})" if d in dimensions else i
+                                                        for d, i in enumerate(ix)])
 
     def p_transpose(self, ins: list[Ref], outs: list, permutation: Sequence[int], **_: Any) -> Ref:
-        x, (shape, dtype) = ins[0], outs[0]
         inverse = {p: j for j, p in enumerate(permutation)}
-        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [ix[inverse[k]] for k in range(len(x.shape))])))
+        return self.viewed(ins[0], outs[0], lambda ix: [ix[inverse[k]] for k in range(len(ins[0].shape))])
 
     def p_concatenate(self, ins: list[Ref], outs: list, dimension: int, **_: Any) -> Ref:
         shape, dtype = outs[0]
@@ -367,7 +405,7 @@ class Translator:
         for x in ins:
             def body(ix: list[str], x: Ref = x, offset: int = offset) -> list[str]:
                 at = [f"{i} + {offset}" if d == dimension else i for d, i in enumerate(ix)]
-                return [f"{ref.name}[{linear(shape, at)}] = ({ref.ctype}){x.at(linear(x.shape, ix))};"]
+                return [f"{ref.name}[{linear(shape, at)}] = ({ref.ctype}){x.get(ix)};"]
 
             self.em.loop(x.shape, body)
             offset += x.shape[dimension]
@@ -379,7 +417,7 @@ class Translator:
         for k, x in enumerate(ins):
             def body(ix: list[str], x: Ref = x, k: int = k) -> list[str]:
                 at = [*ix[:axis], str(k), *ix[axis:]]
-                return [f"{ref.name}[{linear(shape, at)}] = ({ref.ctype}){x.at(linear(x.shape, ix))};"]
+                return [f"{ref.name}[{linear(shape, at)}] = ({ref.ctype}){x.get(ix)};"]
 
             self.em.loop(x.shape, body)
         return ref
@@ -388,7 +426,7 @@ class Translator:
         x, result, offset = ins[0], [], 0
         for (shape, dtype), used in zip(outs, self.used, strict=True):
             def source(ix: list[str], offset: int = offset) -> str:
-                return x.at(linear(x.shape, [f"{i} + {offset}" if d == axis else i for d, i in enumerate(ix)]))
+                return x.get([f"{i} + {offset}" if d == axis else i for d, i in enumerate(ix)])
 
             result.append(self.gathered(shape, dtype, source) if used else UNUSED)
             offset += shape[axis]
@@ -402,7 +440,7 @@ class Translator:
         def body(ix: list[str]) -> list[str]:
             at = [f"{lo} + {i}*{interior + 1}" for (lo, _, interior), i in zip(padding_config, ix, strict=True)]
             checks = " && ".join(f"({a}) >= 0 && ({a}) < {n}" for a, n in zip(at, shape, strict=True)) or "1"
-            return [f"if ({checks}) {ref.name}[{linear(shape, at)}] = {x.at(linear(x.shape, ix))};"]
+            return [f"if ({checks}) {ref.name}[{linear(shape, at)}] = {x.get(ix)};"]
 
         self.em.loop(x.shape, body)
         return ref
@@ -444,7 +482,7 @@ class Translator:
 
         def body(ix: list[str]) -> list[str]:
             out = f"{ref.name}[{linear(shape, [ix[d] for d in kept])}]"
-            return [f"{out} = " + update.format(acc=out, x=x.at(linear(x.shape, ix))) + ";"]
+            return [f"{out} = " + update.format(acc=out, x=x.get(ix)) + ";"]
 
         self.em.loop(x.shape, body)
         return ref
@@ -521,7 +559,7 @@ class Translator:
             lines = [f"{ref.ctype} {acc} = 0;"]
             lines += [f"{'    ' * j}for (int {k} = 0; {k} < {n}; {k}++) {{" for j, (k, n) in enumerate(zip(ks, sizes,
                                                                                                           strict=True))]
-            lines.append(f"{'    ' * len(ks)}{acc} += {a.at(linear(a.shape, ai))} * {b.at(linear(b.shape, bi))};")
+            lines.append(f"{'    ' * len(ks)}{acc} += {a.get(ai)} * {b.get(bi)};")
             lines += [f"{'    ' * j}}}" for j in range(len(ks) - 1, -1, -1)]
             return [*lines, f"{ref.name}[{linear(shape, ix)}] = {acc};"]
 
@@ -541,8 +579,8 @@ class Translator:
             name = self.em.fresh("o")
             self.em.emit(f"const int64_t {name} = {self._start(s, x.shape[d], slice_sizes[d])};")
             names.append(name)
-        return self.gathered(shape, dtype, lambda ix: x.at(linear(x.shape, [f"{o} + {i}" for o, i in zip(names, ix,
-                                                                                                         strict=True)])))
+        return self.gathered(shape, dtype, lambda ix: x.get([f"{o} + {i}" for o, i in zip(names, ix,
+                                                                                                         strict=True)]))
 
     def p_dynamic_update_slice(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
         x, update, starts = ins[0], ins[1], ins[2:]
@@ -554,14 +592,14 @@ class Translator:
             names.append(name)
         self.em.loop(update.shape, lambda ix: [
             f"{ref.name}[{linear(x.shape, [f'{o} + {i}' for o, i in zip(names, ix, strict=True)])}] = "
-            f"{update.at(linear(update.shape, ix))};"])
+            f"{update.get(ix)};"])
         return ref
 
     def _window_start(self, indices: Ref, batch: list[str], index_dim: int, k: int) -> str:
         """Component k of the start index vector at the batch position `batch` of `indices` (index_vector_dim last)."""
         at = [*batch]
         at.insert(index_dim, str(k))
-        return indices.at(linear(indices.shape, at))
+        return indices.get(at)
 
     def p_gather(self, ins: list[Ref], outs: list, dimension_numbers: Any, slice_sizes: Sequence[int], mode: Any,
                  fill_value: Any = None, **_: Any) -> Ref:
@@ -594,7 +632,7 @@ class Translator:
                     at.append(f"{s} + {o}")
                 else:
                     at.append(o)
-            value = x.at(linear(x.shape, at))
+            value = x.get(at)
             if inside:
                 value = f"({' && '.join(inside)}) ? {value} : {_fill(fill_value, dtype)}"
             return [*lines, f"{ref.name}[{linear(shape, ix)}] = {value};"]
@@ -635,7 +673,7 @@ class Translator:
                 else:
                     at.append(o)
             target = f"{ref.name}[{linear(x.shape, at)}]"
-            value = updates.at(linear(updates.shape, ix))
+            value = updates.get(ix)
             statement = f"{target} = {combine.format(acc=target, x=value)};"
             return [*lines, f"if ({' && '.join(inside)}) {statement}" if inside else statement]
 
@@ -717,7 +755,7 @@ class Translator:
                num_carry: int, **_: Any) -> list[Ref]:
         """A loop of `length` iterations: the body on the consts, the carry and the i-th slices of xs; the carry
         replaced, the i-th slices of ys written."""
-        consts, xs = ins[:num_consts], ins[num_consts + num_carry :]
+        consts, xs = ins[:num_consts], [self.materialize(x) for x in ins[num_consts + num_carry :]]
         carry = [self.copy(r) for r in ins[num_consts : num_consts + num_carry]]
         ys = [self.em.buffer(shape, dtype) for shape, dtype in outs[num_carry:]]
         it, at = self.em.fresh("t"), self.em.fresh("j")
@@ -882,7 +920,9 @@ def translate(closed: Any, name: str, arg_names: Sequence[str] | None = None,
     em = Emitter(tag=name)
     args = [Ref(arg_names[k] if arg_names else f"in{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name)
             for k, v in enumerate(jaxpr.invars)]
-    results = Translator(em).run(jaxpr, closed.consts, args)
+    translator = Translator(em)
+    # a view may read an input that an output overwrites: views are stored before any output is written
+    results = [translator.materialize(r) for r in translator.run(jaxpr, closed.consts, args)]
     outs = [Ref(out_names[k] if out_names else f"out{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name)
             for k, v in enumerate(jaxpr.outvars)]
     for out, value in zip(outs, results, strict=True):  # last: an output may alias an input
