@@ -517,13 +517,14 @@ class Translator:
             k = self.em.fresh("k")
             pos = f"{n - 1} - {k}" if reverse else k
             prev = f"{pos} + 1" if reverse else f"{pos} - 1"
-            at = linear(shape, [pos if d == axis else i for d, i in enumerate(ix)])
+            here = [pos if d == axis else i for d, i in enumerate(ix)]
+            at, value = linear(shape, here), x.get(here)
             before = linear(shape, [prev if d == axis else i for d, i in enumerate(ix)])
-            combine = {"add": f"{ref.name}[{before}] + {x.at(at)}", "mul": f"{ref.name}[{before}] * {x.at(at)}",
-                       "max": _max(f"{ref.name}[{before}]", x.at(at), x, ">"),
-                       "min": _max(f"{ref.name}[{before}]", x.at(at), x, "<")}[op]
+            combine = {"add": f"{ref.name}[{before}] + {value}", "mul": f"{ref.name}[{before}] * {value}",
+                       "max": _max(f"{ref.name}[{before}]", value, x, ">"),
+                       "min": _max(f"{ref.name}[{before}]", value, x, "<")}[op]
             return [f"for (int {k} = 0; {k} < {n}; {k}++) {{",
-                    f"    {ref.name}[{at}] = {k} == 0 ? {x.at(at)} : {combine};", "}"]
+                    f"    {ref.name}[{at}] = {k} == 0 ? {value} : {combine};", "}"]
 
         self.em.loop(others, body)
         return ref
