@@ -9,11 +9,17 @@ from ..report.output import DEFAULT_DPI, FORMATS, FigureFormat
 from ..validation import ConfigError
 
 
-def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
-    """The scenario positional and the `--set`, `--t-final`, `--dt`, `--control-period`, `--backend` overrides."""
-    parser.add_argument("scenario", help="a packaged scenario name (see `robotadapt list`) or a TOML file")
+def add_scenario(parser: argparse.ArgumentParser,
+                 what: str = "a packaged scenario name (see `robotadapt list`) or a TOML file") -> None:
+    """The scenario positional (`what` it is for) and `--set`."""
+    parser.add_argument("scenario", help=what)
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                         help="override any scenario field, e.g. --set controller.Kv=20 (repeatable)")
+
+
+def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
+    """The scenario positional and the `--set`, `--t-final`, `--dt`, `--control-period`, `--backend` overrides."""
+    add_scenario(parser)
     parser.add_argument("--t-final", type=float, help="shorthand for --set simulation.t_final=T")
     parser.add_argument("--dt", type=float, help="shorthand for --set simulation.dt=DT")
     parser.add_argument("--control-period", type=float, metavar="T_S",

@@ -12,15 +12,13 @@ import numpy as np
 import tomli_w
 
 from ..validation import ConfigError
-from .common import add_figure_arguments, figure_format
+from .common import add_figure_arguments, add_scenario, figure_format
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("excite", help="optimise a finite Fourier series (Swevers 1997) per joint for identification: "
                        "the smallest condition number of the stacked base regressor within the joint limits")
-    p.add_argument("scenario", help="the scenario whose controller's model is to be identified (packaged name or TOML)")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                   help="override a field of the scenario (repeatable)")
+    add_scenario(p, "the scenario whose controller's model is to be identified (packaged name or TOML)")
     p.add_argument("--harmonics", type=int, default=5, metavar="K", help="harmonics per joint, ≥ 2 (default 5)")
     p.add_argument("--period", type=float, default=10.0, metavar="T", help="period of the series in s (default 10)")
     p.add_argument("--objective", default="cond", choices=("cond", "logdet"),

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import IO
 
 from ..validation import ConfigError
+from .common import add_scenario
 
 
 def _write(text: str, f: IO[str]) -> None:
@@ -22,9 +23,7 @@ def _write(text: str, f: IO[str]) -> None:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("export", help="the scenario's controller tick as C (NAME.c, NAME.h, an example harness): "
                        "NAME_reset and NAME_step for a robot's real-time loop, no Python")
-    p.add_argument("scenario", help="a packaged scenario name (see `robotadapt list`) or a TOML file")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
-                   help="override a field of the scenario (repeatable)")
+    add_scenario(p)
     p.add_argument("--out", type=Path, help="folder for NAME.c, NAME.h, NAME_harness.c and export.json "
                    "(default: results/export-SCENARIO)")
     p.add_argument("--prefix", default="ra", metavar="NAME", help="the C prefix of the files and functions (default ra)")

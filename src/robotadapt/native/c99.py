@@ -596,11 +596,33 @@ class Translator:
             f"{update.get(ix)};"])
         return ref
 
-    def _window_start(self, indices: Ref, batch: list[str], index_dim: int, k: int) -> str:
-        """Component k of the start index vector at the batch position `batch` of `indices` (index_vector_dim last)."""
-        at = [*batch]
-        at.insert(index_dim, str(k))
-        return indices.get(at)
+    def _operand_index(self, x: Ref, indices: Ref, batch: list[str], offsets: dict[int, str], batching: dict[int, int],
+                       mapped: Sequence[int], sizes: Sequence[int], drop: bool) -> tuple[list[str], list[str], list[str]]:
+        """One element of a gather's or scatter's window in the operand `x`: (declarations of the window's starts, the
+        operand's multi-index, the conditions that the window is in range). `batch`: the position in the indices'
+        batch dimensions (index_vector_dim last); `offsets`: the element's offset per window dimension; `batching`:
+        operand dimension → the indices' batch dimension it follows; `mapped`: the operand dimensions the index vector
+        starts; `sizes`: the window's size per operand dimension; `drop`: out-of-range windows are dropped (a condition)
+        rather than clamped."""
+        lines, at, inside = [], [], []
+        for d in range(len(x.shape)):
+            offset = offsets.get(d, "0")
+            if d in batching:
+                at.append(batch[batching[d]])
+            elif d in mapped:
+                s = self.em.fresh("o")
+                component = [*batch]
+                component.insert(len(indices.shape) - 1, str(list(mapped).index(d)))
+                raw, limit = indices.get(component), x.shape[d] - sizes[d]
+                if drop:
+                    lines.append(f"const int64_t {s} = {raw};")
+                    inside.append(f"{s} >= 0 && {s} <= {limit}")
+                else:
+                    lines.append(f"const int64_t {s} = ({raw}) < 0 ? 0 : ({raw}) > {limit} ? {limit} : ({raw});")
+                at.append(f"{s} + {offset}")
+            else:
+                at.append(offset)
+        return lines, at, inside
 
     def p_gather(self, ins: list[Ref], outs: list, dimension_numbers: Any, slice_sizes: Sequence[int], mode: Any,
                  fill_value: Any = None, **_: Any) -> Ref:
@@ -608,7 +630,6 @@ class Translator:
         dn = dimension_numbers
         offset_dims, collapsed, start_map = list(dn.offset_dims), list(dn.collapsed_slice_dims), list(dn.start_index_map)
         batching = dict(zip(dn.operand_batching_dims, dn.start_indices_batching_dims, strict=True))
-        index_dim = len(indices.shape) - 1
         fill = "FILL_OR_DROP" in str(mode)
         window = [d for d in range(len(x.shape)) if d not in collapsed and d not in batching]
         ref = self.em.buffer(shape, dtype)
@@ -616,23 +637,7 @@ class Translator:
         def body(ix: list[str]) -> list[str]:
             batch = [i for d, i in enumerate(ix) if d not in offset_dims]
             offs = {window[j]: ix[d] for j, d in enumerate(offset_dims)}
-            lines, at, inside = [], [], []
-            for d in range(len(x.shape)):
-                o = offs.get(d, "0")
-                if d in batching:  # the operand's batch index is the indices' (index_vector_dim is last)
-                    at.append(batch[batching[d]])
-                elif d in start_map:
-                    s = self.em.fresh("o")
-                    raw = self._window_start(indices, batch, index_dim, start_map.index(d))
-                    limit = x.shape[d] - slice_sizes[d]
-                    if fill:
-                        lines.append(f"const int64_t {s} = {raw};")
-                        inside.append(f"{s} >= 0 && {s} <= {limit}")
-                    else:
-                        lines.append(f"const int64_t {s} = ({raw}) < 0 ? 0 : ({raw}) > {limit} ? {limit} : ({raw});")
-                    at.append(f"{s} + {o}")
-                else:
-                    at.append(o)
+            lines, at, inside = self._operand_index(x, indices, batch, offs, batching, start_map, slice_sizes, fill)
             value = x.get(at)
             if inside:
                 value = f"({' && '.join(inside)}) ? {value} : {_fill(fill_value, dtype)}"
@@ -647,32 +652,17 @@ class Translator:
         window_dims, inserted, to_operand = list(dn.update_window_dims), list(dn.inserted_window_dims), list(
             dn.scatter_dims_to_operand_dims)
         batching = dict(zip(dn.operand_batching_dims, dn.scatter_indices_batching_dims, strict=True))
-        index_dim = len(indices.shape) - 1
         drop = "FILL_OR_DROP" in str(mode) or "PROMISE" not in str(mode) and "CLIP" not in str(mode)
         ref = self.copy(x)
         window = [d for d in range(len(x.shape)) if d not in inserted and d not in batching]
         window_size = {window[j]: updates.shape[d] for j, d in enumerate(window_dims)}
 
+        sizes = [window_size.get(d, 1) for d in range(len(x.shape))]
+
         def body(ix: list[str]) -> list[str]:
             batch = [i for d, i in enumerate(ix) if d not in window_dims]
             offs = {window[j]: ix[d] for j, d in enumerate(window_dims)}
-            lines, at, inside = [], [], []
-            for d in range(len(x.shape)):
-                o = offs.get(d, "0")
-                if d in batching:
-                    at.append(batch[batching[d]])
-                elif d in to_operand:
-                    s = self.em.fresh("o")
-                    raw = self._window_start(indices, batch, index_dim, to_operand.index(d))
-                    limit = x.shape[d] - window_size.get(d, 1)
-                    if drop:
-                        lines.append(f"const int64_t {s} = {raw};")
-                        inside.append(f"{s} >= 0 && {s} <= {limit}")
-                    else:
-                        lines.append(f"const int64_t {s} = ({raw}) < 0 ? 0 : ({raw}) > {limit} ? {limit} : ({raw});")
-                    at.append(f"{s} + {o}")
-                else:
-                    at.append(o)
+            lines, at, inside = self._operand_index(x, indices, batch, offs, batching, to_operand, sizes, drop)
             target = f"{ref.name}[{linear(x.shape, at)}]"
             value = updates.get(ix)
             statement = f"{target} = {combine.format(acc=target, x=value)};"
