@@ -1,5 +1,5 @@
 """The feature matrix (issue 23): every law × effect (continuous, sampled, actuator, sensor, MuJoCo) × engine (numpy,
-jax, a batch on numpy and on jax, the gradient of a tuning objective). Each cell either runs and agrees with the numpy
+jax, c, a batch on numpy, on jax and in C, the gradient of a tuning objective). Each cell either runs and agrees with the numpy
 single run of its law and effect, or is a named refusal: the field and reason of the ConfigError (NotBatchable
 included) the project raises. Anything else raised, or a disagreement, fails the test.
 
@@ -78,7 +78,7 @@ EFFECTS = {
     "sensor": lambda law: (*_sampled(law), "plant.noise_q=1e-4"),
     "MuJoCo": lambda law: (*_sampled(law), "plant.engine='mujoco'"),
 }
-COLUMNS = ("numpy", "jax", "batch numpy", "batch jax", "gradient")
+COLUMNS = ("numpy", "jax", "c", "batch numpy", "batch jax", "batch c", "gradient")
 NOT_RUN = "·"
 GRADIENT_EFFECTS = ("continuous", "sampled", "MuJoCo")  # the actuator's and sensor's gradients: the sampled code, not run
 
@@ -159,10 +159,11 @@ def _cells(law: str, effect: str) -> dict[str, str]:
     else:
         out["numpy"] = "ok"  # the reference itself
 
-    def jax() -> None:
-        _check_same(_load(law, effect, "simulation.backend='jax'").run(), ref, f"{law}, {effect}, jax")
+    def single(backend: str) -> None:
+        _check_same(_load(law, effect, f"simulation.backend='{backend}'").run(), ref, f"{law}, {effect}, {backend}")
 
-    cell("jax", jax)
+    for backend in ("jax", "c"):
+        cell(backend, lambda backend=backend: single(backend))
 
     def batch(backend: str) -> None:
         s = _load(law, effect, f"simulation.backend='{backend}'").setup
@@ -172,7 +173,7 @@ def _cells(law: str, effect: str) -> dict[str, str]:
         for i, single in enumerate(refs):
             _check_same(res.run(i), single, f"{law}, {effect}, batch {backend}, run {i}")
 
-    for backend in ("numpy", "jax"):
+    for backend in ("numpy", "jax", "c"):
         cell(f"batch {backend}", lambda backend=backend: batch(backend))
 
     def gradient() -> None:
@@ -253,8 +254,9 @@ INTRO = """# Feature matrix
 Every law of the project, one packaged scenario per law kind shortened to {t} s (the repetitive law on q_d = sin 6t,
 one period and a tenth), under every effect: continuous time as packaged, sampled at {ts} s
 (`simulation.control_period`; the repetitive law at T/500 = 2.1 ms), an actuator torque limit and sensor noise (both
-sampled), and MuJoCo as the plant (`plant.engine = 'mujoco'`, sampled); on each engine: numpy, jax, a batch of two
-initial states (`simulate_batch`) on numpy and on jax, and the gradient of the tuning objective rms_error
+sampled), and MuJoCo as the plant (`plant.engine = 'mujoco'`, sampled); on each engine: numpy, jax, c (the compiled
+loop translated to C, docs/native.md), a batch of two initial states (`simulate_batch`) on numpy, on jax and in C, and
+the gradient of the tuning objective rms_error
 (`robotadapt tune`'s `Problem`) in `controller.Kv` (in the base law's K_v for sign_robust). A cell is **ok** when it
 runs and agrees with the numpy single run of the same law and effect: q and τ to 1e-9 relative; the batch, each run
 with its own single run; the gradient, its objective with the numpy run's and a finite gradient (for a switching law,
