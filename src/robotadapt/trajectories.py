@@ -29,7 +29,8 @@ class Trajectory(Protocol):
     """A desired trajectory of `n` joints."""
 
     @property
-    def n(self) -> int: ...
+    def n(self) -> int:
+        """The number of joints (read-only: a dataclass field or a property)."""
 
     def __call__(self, t: Array) -> Reference:
         """(q_d, q̇_d, q̈_d) at `t` (a scalar or an array of instants), each of shape `t.shape + (n,)`."""
