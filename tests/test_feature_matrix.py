@@ -210,8 +210,12 @@ def compute(laws: tuple[str, ...]) -> dict[str, dict[tuple[str, str], str]]:
 
 
 def _documented(row: dict[tuple[str, str], str]) -> dict[tuple[str, str], str]:
-    """The cells a doc comparison checks: all of them, the MuJoCo ones only where mujoco is installed."""
-    return {k: v for k, v in row.items() if k[0] != "MuJoCo" or _mujoco_available()}
+    """The cells a doc comparison checks: all of them, the MuJoCo ones only where mujoco is installed, the C ones only
+    where a C compiler is."""
+    from robotadapt.native.build import compiler
+
+    return {k: v for k, v in row.items() if (k[0] != "MuJoCo" or _mujoco_available())
+            and (not k[1].endswith("c") or compiler() is not None)}
 
 
 def render(matrix: dict[str, dict[tuple[str, str], str]]) -> str:
