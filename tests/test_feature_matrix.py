@@ -1,7 +1,7 @@
 """The feature matrix (issue 23): every law × effect (continuous, sampled, actuator, sensor, MuJoCo) × engine (numpy,
-jax, c, a batch on numpy, on jax and in C, the gradient of a tuning objective). Each cell either runs and agrees with the numpy
-single run of its law and effect, or is a named refusal: the field and reason of the ConfigError (NotBatchable
-included) the project raises. Anything else raised, or a disagreement, fails the test.
+jax, c, a batch on numpy, on jax and in C, the gradient of a tuning objective). Each cell either runs and agrees with
+the numpy single run of its law and effect, or is a named refusal: the field and reason of the ConfigError
+(NotBatchable included) the project raises. Anything else raised, or a disagreement, fails the test.
 
 Agreement: same status and logged instants, q and τ within 1e-9 relative (of max(1, max |·|) of the reference), as the
 project's other equality tests. The batch cell runs two loops that differ in q0 (the scenario's, and 0.05 rad more on
