@@ -22,8 +22,8 @@ and JAX's own client that the rest of a program uses, as they were. "c" translat
 (:mod:`robotadapt.native`: the export `robotadapt export` writes), builds it with the system's C compiler (cached on
 disk by its source) and calls it through ctypes on preallocated buffers. "numpy" calls the law itself (a Pinocchio
 model, whose C++ JAX cannot trace, takes it). "auto" takes "c" where the model is traceable and a compiler is present
-(else "jax", saying once why), and "jax" where the translator lacks one of the tick's primitives (the natural law's
-matrix exponential). A guarded law's guard (adaptive computed torque's M̂ ≻ 0) raises on the numpy backend and is not
+(else "jax", saying once why), and "jax" where the translator lacks one of the tick's primitives (a user's law
+may use one), saying so. A guarded law's guard (adaptive computed torque's M̂ ≻ 0) raises on the numpy backend and is not
 read on the compiled ones.
 """
 
@@ -39,13 +39,13 @@ import numpy as np
 
 from .arrays import array_namespace
 from .controllers.base import HasDelayLine, Prepares
-from .native.build import INSTALL, compiler, require_compiler, shared_library
+from .native.build import INSTALL, compiler, library, shared_library
 from .native.c99 import Unsupported
 from .native.controller import Export, export
 from .plant.actuators import Actuator
 from .plant.sensors import Sensor
 from .sim.compiled import float64, jax_module
-from .sim.integrators import Sampled
+from .sim.integrators import Sampled, check_backend
 from .sim.loop import ClosedLoop
 from .sim.sampled import Carry, Inputs, Tick
 from .studies.scenarios import load
@@ -53,9 +53,6 @@ from .trajectories import Trajectory
 from .validation import ConfigError, as_scalar, as_vector
 
 Array = Any
-
-
-BACKENDS = ("auto", "numpy", "jax", "c")
 
 
 def start(loop_tick: Tick, Ts: float, q: Array, dq: Array) -> Carry:
@@ -109,15 +106,12 @@ class RealtimeController:
 
     def __post_init__(self) -> None:
         self.Ts = as_scalar(self.Ts, "simulation.control_period", positive=True)
-        if self.backend not in BACKENDS:
-            raise ConfigError("simulation.backend", f"expected one of {', '.join(BACKENDS)}; got {self.backend!r}")
+        check_backend(self.backend)  # "c" without a compiler: one line naming how to install one
         traceable = self.loop_tick.loop.controller.model.traceable
         if self.backend in ("jax", "c") and not traceable:
             raise ConfigError("simulation.backend", "the controller's model calls compiled code JAX cannot trace "
                               f"(Pinocchio), so the {self.backend!r} backend cannot have it: use backend = 'numpy', "
                               "or robot.model = 'tree'")
-        if self.backend == "c":
-            require_compiler("simulation.backend")
         self._auto = self.backend == "auto"
         if self.backend == "auto":
             self.backend = "numpy" if not traceable else "c" if compiler() is not None else _without_compiler()
@@ -173,7 +167,7 @@ class RealtimeController:
         carry = start(self.loop_tick, self.Ts, q, dq)
         self._inputs, self._k = np.zeros(2 + 2 * n), 0
         if self.backend == "c" and self._native is None:
-            self._native = self._build()
+            self._native = self._build(carry)
         if self.backend == "c" and self._native is not None:
             self._native.reset(q, dq)
             self._state, self._unravel = self._native.state, self._native.unravel
@@ -214,9 +208,9 @@ class RealtimeController:
             return np.zeros(0)
         return np.array(self._unravel(self._state[1:] if self._native is not None else self._state).x)
 
-    def _build(self) -> Native | None:
-        """The C backend's library (None, and "jax" from now on, where "auto" chose C and the translator lacks a
-        primitive of this tick)."""
+    def _build(self, carry: Carry) -> Native | None:
+        """The C backend's library, its state laid out as `carry` raveled (None, and "jax" from now on, where "auto"
+        chose C and the translator lacks a primitive of this tick)."""
         from jax.flatten_util import ravel_pytree
 
         try:
@@ -227,8 +221,7 @@ class RealtimeController:
             warnings.warn(f"robotadapt: {exc}; this controller runs on the 'jax' backend", RuntimeWarning, stacklevel=3)
             self.backend = "jax"
             return None
-        zeros = jax_module().numpy.zeros(self.n)
-        unravel = ravel_pytree(start(self.loop_tick, self.Ts, zeros, zeros))[1]
+        unravel = ravel_pytree(carry)[1]
         return Native(shared_library(code.standalone, "simulation.backend"), code.prefix, self.n, code.state_size,
                       unravel)
 
@@ -240,8 +233,8 @@ class Native:
     def __init__(self, path: Any, prefix: str, n: int, size: int, unravel: Callable[[Any], Carry]) -> None:
         import ctypes
 
-        library = ctypes.CDLL(str(path))
-        self._reset, self._step = getattr(library, f"{prefix}_reset"), getattr(library, f"{prefix}_step")
+        lib = library(path)
+        self._reset, self._step = getattr(lib, f"{prefix}_reset"), getattr(lib, f"{prefix}_step")
         pointer = ctypes.c_void_p
         self._reset.argtypes, self._reset.restype = [pointer, pointer, pointer], None
         self._step.argtypes, self._step.restype = [pointer, ctypes.c_double, pointer, pointer, pointer], None

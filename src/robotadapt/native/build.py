@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..validation import ConfigError
-from .c99 import translate
+from .c99 import c_type, translate
 
 # -O2 without the passes that grow superlinearly on one long function (partial redundancy elimination, value range
 # propagation, global CSE): the Panda's RK4 chunk (28 000 lines) builds in 32 s instead of 94 s
@@ -33,8 +33,7 @@ INSTALL = "install one (Debian/Ubuntu: apt-get install gcc; macOS: xcode-select 
 
 def compiler() -> str | None:
     """The C compiler's path: `$CC` (a name on PATH or a path), else `cc`; None when there is none."""
-    name = os.environ.get("CC", "cc").split()[0] if os.environ.get("CC", "cc").strip() else "cc"
-    return shutil.which(name)
+    return shutil.which((os.environ.get("CC", "").strip() or "cc").split()[0])
 
 
 def require_compiler(field: str) -> str:
@@ -76,7 +75,8 @@ def entry(name: str, n_in: int, n_out: int, types: Sequence[str]) -> str:
 
 
 @cache
-def _library(path: Path) -> Any:
+def library(path: Path) -> Any:
+    """The shared library at `path`, loaded once per process."""
     return ctypes.CDLL(str(path))
 
 
@@ -86,14 +86,12 @@ class Compiled:
     buffers."""
 
     def __init__(self, closed: Any, name: str = "program", field: str = "simulation.backend") -> None:
-        from .c99 import c_type
-
         jaxpr = closed.jaxpr
         self.ins = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.invars]
         self.outs = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.outvars]
         types = [c_type(d) for _, d in self.ins + self.outs]
         self.source = PRELUDE + translate(closed, f"{name}_impl") + entry(name, len(self.ins), len(self.outs), types)
-        self._fn = getattr(_library(shared_library(self.source, field)), name)
+        self._fn = getattr(library(shared_library(self.source, field)), name)
         self._fn.argtypes = [ctypes.POINTER(ctypes.c_void_p)]
         self._fn.restype = None
 

@@ -297,9 +297,9 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe))
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
     most = max(1, int(min(CHUNK_STEPS, INPUT_BYTES // max(step_bytes, 1))) // log_every)
-    per_call = min(most, 1 << max(0, blocks - 1).bit_length())  # a power of two: fewer shapes, fewer compilations
-    if native:  # one shape per program whatever the run's length: gcc builds a large program once, not per t_final
-        per_call = most
+    # XLA: a power of two, few shapes and compilations; C: one shape per program whatever the run's length (gcc builds
+    # a large program once, not per t_final)
+    per_call = most if native else min(most, 1 << max(0, blocks - 1).bit_length())
     one, one_carry = (transition, carry) if mapped is None else (runs[0], map_tree(lambda a: a[0], carry))
     lead = shape if not _runs_shape(one_carry) else ()  # a mapped run's carry has no run axes; a stacked one has
     bad = map_tree(lambda a: jnp.zeros(lead + np.shape(a)), one.blanks(one_carry)[1])
