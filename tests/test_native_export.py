@@ -108,7 +108,8 @@ def test_without_a_compiler_auto_falls_back_once_and_c_and_export_refuse(tmp_pat
     with pytest.warns(RuntimeWarning, match="no C compiler found.*apt-get install gcc") as caught:
         first = RealtimeController.from_scenario("example-6.3.1")
         second = RealtimeController.from_scenario("example-6.3.1")
-    assert first.backend == second.backend == "jax" and len(caught) == 1
+    said = [w for w in caught if "no C compiler found" in str(w.message)]  # other libraries' warnings aside
+    assert first.backend == second.backend == "jax" and len(said) == 1
     with pytest.raises(Exception, match="simulation.backend: no C compiler .*apt-get install gcc"):
         RealtimeController.from_scenario("example-6.3.1", backend="c")
     assert main(["export", "example-6.3.1", "--out", str(tmp_path / "out")]) == 2
