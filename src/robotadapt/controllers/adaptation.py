@@ -83,6 +83,7 @@ class Gradient(EstimateLaw):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "Gamma", as_gain(self.Gamma, self.p, "controller.law.Gamma"))
+        _ = self._Gamma_inv  # now, not at the first storage value: a run leaves the law's skeleton as it was
 
     @cached_property
     def _Gamma_inv(self) -> Array:
@@ -115,6 +116,7 @@ class LandauPI(EstimateLaw):
     def __post_init__(self) -> None:
         object.__setattr__(self, "K_I", as_gain(self.K_I, self.p, "controller.law.K_I"))
         object.__setattr__(self, "F_p", as_gain(self.F_p, self.p, "controller.law.F_p", semidefinite=True))
+        _ = self._K_I_inv  # now: a run leaves the law's skeleton as it was
 
     @cached_property
     def _K_I_inv(self) -> Array:

@@ -41,6 +41,10 @@ class Euclidean:
 
     Gamma: Array
 
+    def __post_init__(self) -> None:
+        if self.Gamma is not None:  # now, not at the first Lyapunov value: a run leaves the law's skeleton as it was
+            _ = self._Gamma_inv
+
     @cached_property
     def _Gamma_inv(self) -> Array:
         return array_namespace(self.Gamma).linalg.inv(self.Gamma)
@@ -85,6 +89,9 @@ class Natural:
 
     gamma: Any
     layout: tuple[Part, ...]
+
+    def __post_init__(self) -> None:
+        _ = self._order  # now: a run leaves the law's skeleton as it was
 
     @cached_property
     def _order(self) -> tuple[Array, Array, Array]:

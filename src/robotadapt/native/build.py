@@ -11,6 +11,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import os
+import pickle
 import shutil
 import subprocess
 import tempfile
@@ -81,19 +82,28 @@ def library(path: Path) -> Any:
 
 
 class Compiled:
-    """A ClosedJaxpr as a native function: `compiled(*arrays) -> list of arrays` (the jaxpr's inputs and outputs, by
-    their avals). Each call allocates its outputs; the hot paths (:mod:`robotadapt.native.controller`) keep their own
-    buffers."""
+    """A native function of arrays: `compiled(*arrays) -> list of arrays`, with the inputs and outputs (shape, dtype) of
+    the traced program it was translated from. Each call allocates its outputs; the hot paths
+    (:mod:`robotadapt.native.controller`) keep their own buffers."""
 
-    def __init__(self, closed: Any, name: str = "program", field: str = "simulation.backend") -> None:
-        jaxpr = closed.jaxpr
-        self.ins = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.invars]
-        self.outs = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.outvars]
-        types = [c_type(d) for _, d in self.ins + self.outs]
-        self.source = PRELUDE + translate(closed, f"{name}_impl") + entry(name, len(self.ins), len(self.outs), types)
-        self._fn = getattr(library(shared_library(self.source, field)), name)
+    def __init__(self, path: Path, name: str, ins: Sequence[tuple[tuple[int, ...], Any]],
+                 outs: Sequence[tuple[tuple[int, ...], Any]]) -> None:
+        self.path, self.name = path, name
+        self.ins = [(tuple(s), np.dtype(d)) for s, d in ins]
+        self.outs = [(tuple(s), np.dtype(d)) for s, d in outs]
+        self._fn = getattr(library(path), name)
         self._fn.argtypes = [ctypes.POINTER(ctypes.c_void_p)]
         self._fn.restype = None
+
+    @classmethod
+    def translated(cls, closed: Any, name: str = "program", field: str = "simulation.backend") -> Compiled:
+        """A ClosedJaxpr translated to C (:func:`robotadapt.native.c99.translate`) and built (:func:`shared_library`)."""
+        jaxpr = closed.jaxpr
+        ins = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.invars]
+        outs = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.outvars]
+        types = [c_type(d) for _, d in ins + outs]
+        source = PRELUDE + translate(closed, f"{name}_impl") + entry(name, len(ins), len(outs), types)
+        return cls(shared_library(source, field), name, ins, outs)
 
     def __call__(self, *args: Any) -> list[np.ndarray]:
         ins = [np.ascontiguousarray(np.asarray(a, dtype=d).reshape(s)) for a, (s, d) in zip(args, self.ins, strict=True)]
@@ -101,6 +111,51 @@ class Compiled:
         table = (ctypes.c_void_p * (len(ins) + len(outs)))(*[a.ctypes.data for a in ins + outs])
         self._fn(table)
         return outs
+
+
+@cache
+def fingerprint() -> str:
+    """What a traced program depends on besides its own description: the package's source, JAX's and numpy's versions.
+    A stored program (:func:`remember`) is found again only under the same fingerprint."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    digest = hashlib.sha256()
+    root = Path(__file__).resolve().parents[1]
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    for package in ("jax", "numpy"):
+        try:
+            digest.update(f"{package} {version(package)}".encode())
+        except PackageNotFoundError:
+            digest.update(package.encode())
+    return digest.hexdigest()
+
+
+def _index(key: str) -> Path:
+    return cache_dir() / "programs" / f"{hashlib.sha256((fingerprint() + key).encode()).hexdigest()[:32]}.pkl"
+
+
+def remembered(key: str) -> tuple[Compiled, Any] | None:
+    """The program stored under `key` (a stable description of what was traced) and its stored companion (the layout
+    of its outputs), loaded without JAX; None when there is none (or its library has gone)."""
+    path = _index(key)
+    try:
+        with path.open("rb") as f:
+            stored = pickle.load(f)
+        return Compiled(cache_dir() / stored["library"], stored["name"], stored["ins"], stored["outs"]), stored["extra"]
+    except (OSError, EOFError, pickle.UnpicklingError, KeyError, AttributeError, ImportError):
+        return None
+
+
+def remember(key: str, program: Compiled, extra: Any) -> None:
+    """Store `program` under `key` with `extra`, written whole (a temporary file renamed), for :func:`remembered`."""
+    path = _index(key)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    stored = {"library": program.path.name, "name": program.name, "ins": [(s, d.str) for s, d in program.ins],
+              "outs": [(s, d.str) for s, d in program.outs], "extra": extra}
+    with tempfile.NamedTemporaryFile(dir=path.parent, delete=False) as f:
+        pickle.dump(stored, f)
+    os.replace(f.name, path)
 
 
 def compiled(fn: Callable[..., Any], *examples: Any) -> Compiled:
@@ -112,4 +167,4 @@ def compiled(fn: Callable[..., Any], *examples: Any) -> Compiled:
         jax = jax_module()
         return jax.make_jaxpr(fn)(*examples)
 
-    return Compiled(trace())
+    return Compiled.translated(trace())

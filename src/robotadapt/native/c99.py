@@ -27,6 +27,8 @@ import numpy as np
 from ..validation import ConfigError
 
 STACK_LIMIT = 4096  # a temporary with more elements than this is a static array
+FUNCTION_MIN = 50  # a nested program of at least this many equations, called more than once, is a C function
+CALLS = ("pjit", "jit", "closed_call", "core_call")
 C_TYPES = {"float64": "double", "float32": "float", "int64": "int64_t", "int32": "int32_t", "int16": "int16_t",
            "int8": "int8_t", "uint64": "uint64_t", "uint32": "uint32_t", "uint8": "uint8_t", "bool": "uint8_t"}
 
@@ -145,6 +147,14 @@ class Emitter:
     counter: itertools.count = field(default_factory=itertools.count)
     depth: int = 1
     tag: str = ""  # the function's name: its file-scope constants are named after it
+    functions: list[str] = field(default_factory=list)  # file-scope C functions of nested programs called repeatedly
+    defined: dict[Any, tuple[str, list[int]]] = field(default_factory=dict)  # their names and kept outputs, by call
+    calls: dict[int, int] = field(default_factory=dict)  # how often each nested program is called (:func:`_calls`)
+
+    def nested(self) -> Emitter:
+        """An emitter for a function of its own, sharing this one's names, constants and functions."""
+        return Emitter(consts=self.consts, counter=self.counter, tag=self.tag, functions=self.functions,
+                       defined=self.defined, calls=self.calls)
 
     def fresh(self, prefix: str = "v") -> str:
         return f"{prefix}{next(self.counter)}"
@@ -246,6 +256,31 @@ def live(jaxpr: Any, used: Sequence[bool] | None = None) -> list[tuple[Any, list
 UNUSED = Ref("0", (), "float64", scalar_expr=True)  # an output nothing reads
 
 
+def _hashable(value: Any) -> Any:
+    """A parameter of an equation as a dictionary key: containers by their items, arrays by their bytes, a value
+    without a hash (a nested program) by its identity."""
+    if isinstance(value, (tuple, list)):
+        return tuple(_hashable(v) for v in value)
+    if isinstance(value, dict):
+        return tuple(sorted((k, _hashable(v)) for k, v in value.items()))
+    if isinstance(value, np.ndarray):
+        return (value.dtype.str, value.shape, value.tobytes())
+    try:
+        hash(value)
+    except TypeError:
+        return ("id", id(value))
+    return value
+
+
+def _equation_key(eqn: Any, mask: Sequence[bool], env: dict[Any, Ref]) -> Any:
+    """What an equation computes: its primitive, parameters and operands (values by identity, literals by value), and
+    which outputs are read. Two equations with one key compute the same values (the program is pure), so the second
+    is not translated: the duplicate work a program traced from separate calls holds (XLA's CSE does the same)."""
+    operands = tuple(("lit", str(a.aval.dtype), np.asarray(a.val).tobytes()) if hasattr(a, "val") else id(env[a])
+                     for a in eqn.invars)
+    return eqn.primitive.name, _hashable(eqn.params), operands, tuple(mask)
+
+
 class Translator:
     """Translates one jaxpr (with its constants) into statements of an :class:`Emitter`."""
 
@@ -266,9 +301,16 @@ class Translator:
                 return self.em.constant(np.asarray(atom.val, dtype=atom.aval.dtype))
             return env[atom]
 
+        seen: dict[Any, list[Ref]] = {}  # equations already translated, by what they compute (value numbering)
         for eqn, mask in live(jaxpr, used):
-            self.used = mask
-            outs = self.equation(eqn, [read(a) for a in eqn.invars])
+            key = None if eqn.effects else _equation_key(eqn, mask, env)
+            if key is not None and key in seen:  # the same primitive on the same values: its results again
+                outs = seen[key]
+            else:
+                self.used = mask
+                outs = self.equation(eqn, [read(a) for a in eqn.invars])
+                if key is not None:
+                    seen[key] = outs
             for var, ref in zip(eqn.outvars, outs, strict=True):
                 env[var] = ref
         return [read(v) if used is None or used[k] else UNUSED for k, v in enumerate(jaxpr.outvars)]
@@ -680,7 +722,40 @@ class Translator:
     # -- nested programs ----------------------------------------------------------------------------------------------
 
     def p_jit(self, ins: list[Ref], outs: list, jaxpr: Any, **_: Any) -> list[Ref]:
-        return self.call(jaxpr, ins)
+        """Inlined; a program called more than once (an RK4 step's rate) and not small is a C function of its own,
+        translated once: a quarter of the text for gcc, the same arithmetic."""
+        if self.em.calls.get(id(jaxpr), 0) < 2 or len(jaxpr.jaxpr.eqns) < FUNCTION_MIN:
+            return self.call(jaxpr, ins)
+        key = (id(jaxpr), tuple(self.used), tuple((r.shape, r.dtype) for r in ins))
+        if key not in self.em.defined:
+            self.em.defined[key] = self._function(jaxpr, ins, outs)
+        name, kept = self.em.defined[key]
+        pointers = [self._pointer(r) for r in ins]
+        results = [self.em.buffer(*outs[k]) for k in kept]
+        self.em.emit(f"{name}({', '.join(pointers + [r.name for r in results])});")
+        found = dict(zip(kept, results, strict=True))
+        return [found.get(k, UNUSED) for k in range(len(outs))]
+
+    def _function(self, closed: Any, ins: list[Ref], outs: list) -> tuple[str, list[int]]:
+        """`static void NAME(const T *a0, …, T *r0, …)` computing `closed` on arguments shaped like `ins`, written to the
+        emitter's functions: (NAME, the outputs it writes: those read)."""
+        name = f"{self.em.tag}_f{len(self.em.defined)}"
+        sub = self.em.nested()
+        args = [Ref(f"a{k}", r.shape, r.dtype) for k, r in enumerate(ins)]
+        values = Translator(sub).run(closed.jaxpr, closed.consts, args, self.used)
+        kept = [k for k, v in enumerate(values) if v is not UNUSED]
+        returns = [Ref(f"r{k}", *outs[k]) for k in kept]
+        for target, k in zip(returns, kept, strict=True):
+            Translator(sub)._copy_into(target, values[k], "0", max(target.size, 1))
+        params = [f"const {a.ctype} *{a.name}" for a in args] + [f"{r.ctype} *{r.name}" for r in returns]
+        self.em.functions.append("\n".join([f"static void {name}({', '.join(params)}) {{", *sub.lines, "}", ""]))
+        return name, kept
+
+    def _pointer(self, ref: Ref) -> str:
+        """A pointer to `ref`'s elements: a buffer as it is, a view or a scalar expression stored first."""
+        if ref.scalar_expr:
+            ref = self.gathered(ref.shape, ref.dtype, lambda ix: ref.name)
+        return self.materialize(ref).name
 
     p_pjit = p_jit
     p_closed_call = p_jit
@@ -908,7 +983,7 @@ def translate(closed: Any, name: str, arg_names: Sequence[str] | None = None,
     """The C99 text of `static void name(const T *in…, T *out…)` computing the ClosedJaxpr `closed` (module
     docstring); its constants become static arrays before the function."""
     jaxpr = closed.jaxpr
-    em = Emitter(tag=name)
+    em = Emitter(tag=name, calls=_calls(jaxpr, {}))
     args = [Ref(arg_names[k] if arg_names else f"in{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name)
             for k, v in enumerate(jaxpr.invars)]
     translator = Translator(em)
@@ -922,4 +997,17 @@ def translate(closed: Any, name: str, arg_names: Sequence[str] | None = None,
 
         em.loop([max(out.size, 1)], copy)
     params = [f"const {a.ctype} *{a.name}" for a in args] + [f"{o.ctype} *{o.name}" for o in outs]
-    return "\n".join([*em.consts, f"static void {name}({', '.join(params)}) {{", *em.lines, "}", ""])
+    return "\n".join([*em.consts, *em.functions, f"static void {name}({', '.join(params)}) {{", *em.lines, "}", ""])
+
+
+def _calls(jaxpr: Any, counts: dict[int, int]) -> dict[int, int]:
+    """How many call sites each nested program (a jit's jaxpr) has in `jaxpr` and the programs inside it."""
+    for eqn in jaxpr.eqns:
+        if eqn.primitive.name in CALLS:
+            counts[id(eqn.params["jaxpr"])] = counts.get(id(eqn.params["jaxpr"]), 0) + 1
+        for value in eqn.params.values():
+            for sub in value if isinstance(value, (tuple, list)) else [value]:
+                inner = getattr(sub, "jaxpr", sub)
+                if hasattr(inner, "eqns"):
+                    _calls(inner, counts)
+    return counts

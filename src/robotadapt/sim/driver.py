@@ -238,27 +238,80 @@ def _axes(mapped: Any) -> Any:
     return 0 if mapped else None
 
 
-NATIVE: dict[Any, tuple[Any, Any, Any]] = {}  # C programs by (JAX program, argument shapes): (program, native, tree)
+NATIVE: dict[Any, tuple[Any, Any]] = {}  # C programs by (program description, argument shapes): (native, outputs)
 
 
-def _native(program: Any, *args: Any) -> Any:
-    """`program(*args)` run as C: its jaxpr on these shapes translated and built once (:mod:`robotadapt.native`)."""
-    from ..native.build import Compiled
+def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: Any, xs: Any, n: int) -> Any:
+    """`make()(arrays, state, xs, n)` run as C: the program traced on these shapes, translated and built once
+    (:mod:`robotadapt.native`); found again, without JAX, in this process or on disk where `static` (the program's
+    description: the transition's skeleton, log_every, mapping) is stable across processes (:func:`_stable`)."""
+    from ..native import build
 
-    jax = jax_module()
-    leaves, _ = jax.tree_util.tree_flatten(args)
-    key = (id(program), tuple((np.shape(a), np.asarray(a).dtype.str) for a in leaves))
+    leaves = [*arrays, *_flatten(state), *_flatten(xs), n]
+    key = (static, tuple((np.shape(a), np.asarray(a).dtype.str) for a in leaves))
     if key not in NATIVE:
-        closed = jax.make_jaxpr(program)(*args)
-        tree = jax.tree_util.tree_structure(jax.eval_shape(program, *args))
+        stable = _stable(key)
+        found = build.remembered(stable) if stable is not None else None
+        if found is None:
+            found = _translate(make(), (arrays, state, xs, n))
+            if stable is not None:
+                build.remember(stable, *found)
         if len(NATIVE) >= MAX_PROGRAMS:
             NATIVE.pop(next(iter(NATIVE)))
-        NATIVE[key] = (program, Compiled(closed, "chunk"), tree)
-    _, native, tree = NATIVE[key]
-    return jax.tree_util.tree_unflatten(tree, native(*leaves))
+        NATIVE[key] = found
+    native, outputs = NATIVE[key]
+    values = native(*leaves)
+    return map_tree(lambda i: values[i], outputs)
 
 
 @float64
+def _translate(program: Any, args: tuple[Any, ...]) -> tuple[Any, Any]:
+    """(the C program of `program(*args)`, its outputs' layout: their tuples with each array's position instead)."""
+    from ..native.build import Compiled
+
+    jax = jax_module()
+    ins, _ = jax.tree_util.tree_flatten(args)
+    arrays, state, xs, n = args
+    if len(ins) != len(arrays) + len(_flatten(state)) + len(_flatten(xs)) + 1:
+        raise ConfigError("simulation.backend", "the compiled loop's inputs hold more than tuples of arrays")
+    closed = jax.make_jaxpr(program)(*args)
+    shapes = jax.eval_shape(program, *args)
+    count = iter(range(len(closed.jaxpr.outvars)))
+    outputs = map_tree(lambda _: next(count), shapes)
+    if next(count, None) is not None:
+        raise ConfigError("simulation.backend", "the compiled loop's outputs hold more than tuples of arrays")
+    return Compiled.translated(closed, "chunk"), outputs
+
+
+def _stable(key: Any) -> str | None:
+    """`key` as text that means the same program in another process: None where it holds an object known only by its
+    identity here. A class from outside the package carries its module's source (a user's law, edited, is traced
+    again); the package's own source is in the store's fingerprint."""
+    text = repr(key)
+    if "('id', " in text:
+        return None
+    sources = []
+    for kind in sorted(_types(key), key=lambda t: f"{t.__module__}.{t.__qualname__}"):
+        if kind.__module__.split(".")[0] in ("robotadapt", "builtins", "numpy"):
+            continue
+        module = sys.modules.get(kind.__module__)
+        path = getattr(module, "__file__", None)
+        if path is None:
+            return None
+        with open(path, "rb") as f:
+            sources.append(f.read())
+    return text + repr(sources)
+
+
+def _types(key: Any) -> set[type]:
+    """The classes named in a skeleton."""
+    if isinstance(key, type):
+        return {key}
+    if isinstance(key, tuple):
+        return set().union(*(_types(k) for k in key))
+    return set()
+
+
 def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
           mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any]:
     """The compiled loop: :func:`_python`'s results, from `lax.scan` over blocks of steps (`mapped`: the runs'
@@ -266,7 +319,8 @@ def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, 
     that meets code needing concrete values (numpy-only code) is a ConfigError naming `simulation.backend` and the
     law."""
     try:
-        return _compiled(runs, transition, carry, feed, n, log_every, mapped, native)
+        run = _compiled if native else float64(_compiled)  # C: JAX only where a program is traced
+        return run(runs, transition, carry, feed, n, log_every, mapped, native)
     except ConfigError:
         raise
     except Exception as exc:  # tracing met code that needs concrete values
@@ -292,7 +346,8 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     else:
         arrays = [jnp.asarray(a) for a in _leaves(transition)]
         shape, axes = _runs_shape(carry), None
-    program = _program(runs[0] if mapped is not None else transition, log_every, axes)
+    one = transition if mapped is None else runs[0]
+    static = (skeleton(one.program_key(), []), log_every, axes)
     probe = feed(0, 1)
     step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe))
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
@@ -300,7 +355,7 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     # XLA: a power of two, few shapes and compilations; C: one shape per program whatever the run's length (gcc builds
     # a large program once, not per t_final)
     per_call = most if native else min(most, 1 << max(0, blocks - 1).bit_length())
-    one, one_carry = (transition, carry) if mapped is None else (runs[0], map_tree(lambda a: a[0], carry))
+    one_carry = carry if mapped is None else map_tree(lambda a: a[0], carry)
     lead = shape if not _runs_shape(one_carry) else ()  # a mapped run's carry has no run axes; a stacked one has
     bad = map_tree(lambda a: jnp.zeros(lead + np.shape(a)), one.blanks(one_carry)[1])
     state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad)
@@ -312,7 +367,10 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
                   feed(first * log_every, real))  # the padding: zeros, with its step indices after n (not computed)
         xs = xs._replace(k=np.arange(first * log_every, first * log_every + size))
         xs = _blocked(xs, mapped, per_call, log_every)
-        state, (record, ok) = _native(program, arrays, state, xs, n) if native else program(arrays, state, xs, n)
+        if native:
+            state, (record, ok) = _native(lambda: _program(one, log_every, axes), static, arrays, state, xs, n)
+        else:
+            state, (record, ok) = _program(one, log_every, axes)(arrays, state, xs, n)
         move = partial(_rows, keep=min(per_call, blocks - first), runs_first=mapped is not None)
         records.append(map_tree(move, record))
         valid.append(move(ok))
