@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from robotadapt.native.build import compiled, compiler
-from robotadapt.native.c99 import PRIMITIVES, Unsupported
+from robotadapt.native.c99 import PRIMITIVES, Unsupported, translate
 
 pytestmark = pytest.mark.skipif(compiler() is None, reason="no C compiler (set CC or install gcc)")
 RNG = np.random.default_rng(28)
@@ -106,3 +106,53 @@ def test_batched_gather_and_scatter_equal_jax():
         got = compiled(fn, x, i)(x, i)
     for g, e in zip(got, expected, strict=True):
         np.testing.assert_allclose(g, np.asarray(e), rtol=1e-12)
+
+
+def _source(fn, *args):
+    with jax.enable_x64(True):
+        return translate(jax.make_jaxpr(fn)(*args), "f")
+
+
+def test_an_equation_computed_twice_is_translated_once():
+    """Value numbering: the same primitive on the same values (two calls of one law's regressor in a traced step) is
+    written once; a different operand or parameter is not merged."""
+    def twice(x, y):
+        a = jnp.tanh(x) @ y
+        b = jnp.tanh(x) @ y  # the same again
+        c = jnp.tanh(y.T) @ x.T  # other operands
+        return a + b, c, jnp.sum(x, axis=0), jnp.sum(x, axis=1)
+
+    text = _source(twice, A, B)
+    assert text.count("tanh(") == 2 and text.count("for (int") < _source(lambda x, y: twice(x, y)[0], A, B).count(
+        "for (int") + 20
+    with jax.enable_x64(True):
+        expected = twice(jnp.asarray(A), jnp.asarray(B))
+        got = compiled(twice, A, B)(A, B)
+    for g, e in zip(got, expected, strict=True):
+        np.testing.assert_allclose(g, np.asarray(e), rtol=1e-12, atol=1e-14)
+
+
+def test_a_program_called_repeatedly_is_one_c_function():
+    """A nested program called more than once (an RK4 step's four rates) is one C function called at each site, its
+    outputs as JAX's; called once, it is inlined."""
+    rate = jax.jit(lambda z, t: jnp.tanh(jnp.outer(z, z) @ z + t) * jnp.cos(z * t) - jnp.sin(z).sum() * z
+                   + jnp.stack([z[1:], z[:-1]]).sum() + jnp.cumsum(z) @ jnp.eye(3) + jnp.linalg.norm(z) ** 2
+                   + jnp.exp(-z) / (1 + z * z) + jnp.arctan2(z, 1 + t) + jnp.maximum(z, 0) * jnp.minimum(z, t)
+                   + jnp.where(z > 0, z, -z) + jnp.floor(z) * jnp.round(t) + jnp.sqrt(1 + z ** 4) + jnp.log1p(z * z)
+                   + jnp.sinh(z) + jnp.cosh(z) + jnp.clip(z, -1, 1) * jnp.sign(z) + jnp.max(z) + jnp.min(z)
+                   + jnp.prod(z) + jnp.mean(z) + jnp.var(z) + jnp.std(z) + jnp.sort(z) + jnp.abs(z).sum())
+
+    def rk4(z, h):
+        k1 = rate(z, 0.0)
+        k2 = rate(z + h / 2 * k1, h / 2)
+        k3 = rate(z + h / 2 * k2, h / 2)
+        k4 = rate(z + h * k3, h)
+        return z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    z, h = RNG.normal(size=3), 0.01
+    text = _source(rk4, z, h)
+    assert text.count("static void f_f") == 1 and text.count("f_f0(") - 1 == 4  # defined once, called four times
+    assert "static void f_f" not in _source(lambda z, h: rate(z, h), z, h)
+    with jax.enable_x64(True):
+        expected = rk4(jnp.asarray(z), h)
+    np.testing.assert_allclose(compiled(rk4, z, h)(z, h)[0], np.asarray(expected), rtol=1e-12, atol=1e-14)

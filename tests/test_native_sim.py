@@ -4,6 +4,9 @@ the numpy loop; where it does not apply it says so in one line."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -54,3 +57,45 @@ def test_without_a_compiler_backend_c_is_one_line(tmp_path, monkeypatch, capsys)
     err = capsys.readouterr().err.strip()
     assert err.startswith("robotadapt: error: simulation.backend: no C compiler") and "\n" not in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("name", ["example-6.3.1", "problem-6.4-1", "problem-6.4-2"])
+def test_a_second_run_reuses_the_first_runs_program(name):
+    """A run leaves its law as it was (the inverses of Γ or K_I a Lyapunov or storage value needs are computed at
+    construction, not at the first value): a second run of one scenario takes the first one's program, not a new
+    compilation (a gcc build of seconds for an n-DOF arm)."""
+    from robotadapt.sim import driver
+
+    scenario = load(name, ["simulation.backend='c'", "simulation.t_final=0.2"])
+    scenario.run()
+    before = set(driver.NATIVE)
+    scenario.run()
+    assert set(driver.NATIVE) == before
+
+
+def test_a_warm_process_runs_c_without_importing_jax():
+    """A fresh process that finds its program in the store (by the transition's description, the package's source and
+    JAX's version) runs it without tracing: JAX is not imported, and the run equals the one that traced it."""
+    script = ("import sys; from robotadapt.studies.scenarios import load; "
+              "r = load('example-6.3.1', [\"simulation.backend='c'\", 'simulation.t_final=1.5']).run(); "
+              "print('jax' in sys.modules, repr(r.q[-1].tolist()))")
+    runs = [subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout.split(" ", 1)
+            for _ in range(2)]
+    assert runs[1][0] == "False" and runs[1][1] == runs[0][1]
+
+
+def test_a_users_class_is_part_of_the_stored_programs_key(tmp_path, monkeypatch):
+    """A class from outside the package (a user's law) enters the stored key with its module's source, so an edited law
+    is traced again; an object known only by its identity has no stable key (it is traced in each process)."""
+    from robotadapt.sim.driver import _stable
+
+    (tmp_path / "mylaw.py").write_text("class Law:\n    gain = 1.0\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import mylaw
+
+    key = ((mylaw.Law, (("gain", 1.0),)), 10, None)
+    first = _stable(key)
+    assert first is not None and "gain = 1.0" in first
+    (tmp_path / "mylaw.py").write_text("class Law:\n    gain = 2.0\n")
+    assert _stable(key) != first
+    assert _stable(((mylaw.Law, (("f", ("id", 1234)),)), 10, None)) is None
