@@ -95,14 +95,14 @@ def robotadapt_c() -> np.ndarray:
     return robotadapt_simulate("c")
 
 
-def first_jax_run_seconds() -> tuple[float, float]:
-    """Wall time of a fresh process's first compiled run (tracing + compilation + run), with an empty compilation
-    cache and then with the cache the first process left on disk."""
+def first_run_seconds(backend: str) -> tuple[float, float]:
+    """Wall time of a fresh process's first compiled run on `backend` (import, tracing, compilation, run), with an empty
+    cache and then with the programs the first process left on disk (C: found without tracing, JAX not imported)."""
     import os
     import tempfile
 
-    script = ("import time; t0 = time.perf_counter(); from bench_single_run import robotadapt_jax; robotadapt_jax(); "
-              "print(time.perf_counter() - t0)")
+    script = (f"import time; t0 = time.perf_counter(); from bench_single_run import robotadapt_simulate; "
+              f"robotadapt_simulate({backend!r}); print(time.perf_counter() - t0)")
     out = []
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, ROBOTADAPT_CACHE=cache)
@@ -111,6 +111,17 @@ def first_jax_run_seconds() -> tuple[float, float]:
                                   cwd=os.path.dirname(os.path.abspath(__file__)))
             out.append(float(done.stdout.split()[-1]))
     return out[0], out[1]
+
+
+def fresh_cli_seconds(repeats: int = 3) -> float:
+    """Median wall time of a fresh `robotadapt run example-6.3.1` (default backend, the three figures written) once a
+    first run has stored its program."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as out:
+        command = [sys.executable, "-m", "robotadapt", "run", "example-6.3.1", "--out", out]
+        subprocess.run(command, check=True, capture_output=True)
+        return import_seconds_of(command, repeats)
 
 
 def robotadapt_batch_of_one() -> np.ndarray:
@@ -129,14 +140,19 @@ def timed(fn: Callable[[], np.ndarray], repeats: int) -> tuple[float, np.ndarray
     return statistics.median(times), out
 
 
-def import_seconds(statement: str, repeats: int = 5) -> float:
-    """Median wall time of a fresh interpreter running `statement`."""
+def import_seconds_of(command: list[str], repeats: int) -> float:
+    """Median wall time of a fresh process running `command`."""
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-c", statement], check=True)
+        subprocess.run(command, check=True, capture_output=True)
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
+
+
+def import_seconds(statement: str, repeats: int = 5) -> float:
+    """Median wall time of a fresh interpreter running `statement`."""
+    return import_seconds_of([sys.executable, "-c", statement], repeats)
 
 
 def main() -> None:
@@ -158,9 +174,14 @@ def main() -> None:
         print(f"{name:<36} {seconds:>9.3f} {t_loop / seconds:>11.2f}x {t_ivp / seconds:>12.2f}x {diff:>20.2e}")
         if diff > tol and tol > 0:
             failed.append(f"{name}: final state differs from the plain loop's by {diff:.2e} > {tol:g}")
-    cold, warm = first_jax_run_seconds()
-    print(f"\njax backend, first run of a fresh process (import, trace, compile, run): {cold:.2f} s with an empty "
-          f"compilation cache, {warm:.2f} s with the cache on disk")
+    print()
+    for backend in ("jax", "c"):
+        cold, warm = first_run_seconds(backend)
+        print(f"{backend} backend, first run of a fresh process (import, trace, "
+              f"compile, run): {cold:.2f} s with an empty cache, {warm:.2f} s with the program on disk")
+    cli = fresh_cli_seconds()
+    print(f"a fresh `robotadapt run example-6.3.1` with its figures, program on disk: {cli:.2f} s = "
+          f"{cli / t_loop:.2f}x the plain loop (goal ≤ 1.5x)")
     python = import_seconds("pass")
     top = import_seconds("import robotadapt")
     lib = import_seconds("import robotadapt.sim, robotadapt.sim.batch, robotadapt.studies.scenarios")

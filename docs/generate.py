@@ -317,8 +317,8 @@ MEANINGS = {
     "t_final": ("simulated time", "s", "10.0"), "dt": ("integration step (max step for solve_ivp; plant sub-step "
                                                       "when sampled)", "s", "1e-3"),
     "method": ("'rk4' (fixed step) or a solve_ivp method ('RK45', 'DOP853', 'Radau', …)", "—", "'rk4'"),
-    "backend": ("'auto' (compiled unless short), 'numpy', 'jax' or 'c' (the compiled loop as C; fixed-step and "
-                "sampled)", "—", "'auto'"),
+    "backend": ("'auto' (compiled unless short: a single run to C where a compiler is present, else JAX), 'numpy', "
+                "'jax' or 'c' (the compiled loop as C; fixed-step and sampled)", "—", "'auto'"),
     "rtol": ("solve_ivp relative tolerance", "—", "1e-8"), "atol": ("solve_ivp absolute tolerance", "—", "1e-10"),
     "log_every": ("keep every k-th step", "—", "1"), "max_state": ("divergence guard on |state|", "—", "1e6"),
     "control_period": ("sampled-data control period (zero-order hold)", "s", "1e-3"),

@@ -241,8 +241,9 @@ def test_plant_effects_in_continuous_time_compile(overrides):
 
 
 def test_auto_compiles_long_runs_steps_short_ones_and_falls_back_for_numpy_only_code():
-    """The default backend: a run of at least AUTO_MIN_STEPS steps is compiled, a shorter one stepped by numpy, and a
-    law written with numpy only (a user's own, as in the tutorial) is stepped by numpy instead of failing."""
+    """The default backend: a run of at least AUTO_MIN_STEPS steps is compiled (to C where a compiler is present), a
+    shorter one stepped by numpy, and a law written with numpy only (a user's own, as in the tutorial) is stepped by
+    numpy instead of failing."""
     from dataclasses import dataclass
 
     from robotadapt.sim import simulate
@@ -251,7 +252,9 @@ def test_auto_compiles_long_runs_steps_short_ones_and_falls_back_for_numpy_only_
     ctrl = InertiaRelated(ARM, 2.5, 10.0, 20.0, [0.0, 0.0])
     long_run = simulate(Plant(ARM, PHI), ctrl, sinusoid(2), t_final=AUTO_MIN_STEPS * 1e-3, log_every=100)
     short_run = simulate(Plant(ARM, PHI), ctrl, sinusoid(2), t_final=(AUTO_MIN_STEPS - 1) * 1e-3, log_every=100)
-    assert long_run.info["backend"] == "jax" and short_run.info["backend"] == "numpy"
+    from robotadapt.native.build import compiler
+
+    assert long_run.info["backend"] == ("c" if compiler() else "jax") and short_run.info["backend"] == "numpy"
 
     @dataclass(frozen=True, eq=False)
     class NumpyOnly(InertiaRelated):
@@ -263,3 +266,31 @@ def test_auto_compiles_long_runs_steps_short_ones_and_falls_back_for_numpy_only_
                    t_final=AUTO_MIN_STEPS * 1e-3, log_every=100)
     assert res.ok and res.info["backend"] == "numpy"
     np.testing.assert_allclose(res.q, long_run.q, rtol=0, atol=1e-9)
+
+
+def test_auto_takes_jax_where_the_c_translator_lacks_a_primitive():
+    """Under "auto", a single run whose program holds a primitive the C translator lacks (an eigendecomposition here)
+    is compiled by JAX instead, with a warning naming the primitive; asked for by name, "c" fails in one line."""
+    from dataclasses import dataclass
+
+    from robotadapt.arrays import array_namespace
+    from robotadapt.native.build import compiler
+    from robotadapt.sim.integrators import AUTO_MIN_STEPS, NotTraceableWarning
+    from robotadapt.validation import ConfigError
+
+    if compiler() is None:
+        pytest.skip("no C compiler")
+
+    @dataclass(frozen=True, eq=False)
+    class WithEigh(InertiaRelated):
+        def __call__(self, t, x, q, dq, ref):
+            tau, dx = super().__call__(t, x, q, dq, ref)
+            xp = array_namespace(q)
+            return tau + 0.0 * xp.linalg.eigh(xp.eye(2) + 0.0 * q[..., :1, None])[0], dx
+
+    law = WithEigh(ARM, 2.5, 10.0, 20.0, [0.0, 0.0])
+    with pytest.warns(NotTraceableWarning, match="eigh"):
+        res = simulate(Plant(ARM, PHI), law, sinusoid(2), t_final=AUTO_MIN_STEPS * 1e-3, log_every=100)
+    assert res.ok and res.info["backend"] == "jax"
+    with pytest.raises(ConfigError, match="^native: the C translator has no primitive 'eigh'"):
+        simulate(Plant(ARM, PHI), law, sinusoid(2), t_final=0.1, integrator=RK4(1e-3, "c"))

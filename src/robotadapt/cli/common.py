@@ -27,7 +27,8 @@ def add_scenario_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--backend", choices=("auto", "numpy", "jax", "c"),
                         help="shorthand for --set simulation.backend=NAME: 'jax' compiles the loop, 'numpy' steps it "
                              "in Python, 'c' translates the compiled loop to C (the system's compiler; fixed-step and "
-                             "sampled runs), 'auto' (the scenario's default) compiles all but short runs")
+                             "sampled runs), 'auto' (the scenario's default) compiles all but short runs (a single "
+                             "run to C where a compiler is present; batches, and runs without one, with JAX)")
 
 
 def overrides(args: argparse.Namespace) -> list[str]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from functools import cached_property
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -80,6 +80,8 @@ class Gradient(EstimateLaw):
 
     p: int
     Gamma: Any
+    #: the constants computed from Γ, again from a traced Γ (tuning)
+    derived: ClassVar[tuple[str, ...]] = ("_Gamma_inv",)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "Gamma", as_gain(self.Gamma, self.p, "controller.law.Gamma"))
@@ -112,6 +114,8 @@ class LandauPI(EstimateLaw):
     p: int
     K_I: Any
     F_p: Any
+    #: the constants computed from K_I, again from a traced K_I (tuning)
+    derived: ClassVar[tuple[str, ...]] = ("_K_I_inv",)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "K_I", as_gain(self.K_I, self.p, "controller.law.K_I"))

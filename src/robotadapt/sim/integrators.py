@@ -35,28 +35,39 @@ def check_backend(backend: Any) -> str:
     return backend
 
 
-def choose_backend(backend: str, steps: int, traceable: bool) -> str:
-    """The backend a run takes: "numpy" or "jax" as asked; "auto" compiles (JAX) a loop whose models are traceable
-    when it has at least `AUTO_MIN_STEPS` steps, and steps it with numpy otherwise."""
+def choose_backend(backend: str, steps: int, traceable: bool, single: bool = False) -> str:
+    """The backend a run takes: "numpy", "jax" or "c" as asked; "auto" compiles a loop whose models are traceable when
+    it has at least `AUTO_MIN_STEPS` steps, and steps it with numpy otherwise. A `single` run compiles to C where a C
+    compiler is present (one native call per chunk, no JAX to import once its program is stored), a batch with JAX."""
     if backend != "auto":
         return backend
-    return "jax" if traceable and steps >= AUTO_MIN_STEPS else "numpy"
+    if not traceable or steps < AUTO_MIN_STEPS:
+        return "numpy"
+    from ..native.build import compiler
+
+    return "c" if single and compiler() is not None else "jax"
 
 
 class NotTraceableWarning(UserWarning):
     """Under `backend = "auto"`, a law or model JAX could not trace was stepped with numpy instead (slower, same
-    numbers); docs/tutorial.md#traceable says what tracing needs and how to check a law."""
+    numbers), or a program the C translator lacks a primitive of was compiled with JAX; docs/tutorial.md#traceable says
+    what tracing needs and how to check a law."""
 
 
 def run_on(asked: str, backend: str, run: Callable[[str], T]) -> tuple[T, str]:
-    """`run(backend)` and the backend it ran on. Under "auto", a program JAX cannot trace (a ConfigError naming
-    `simulation.backend`, e.g. a user's law written with numpy calls) runs with numpy instead, with a
-    :class:`NotTraceableWarning` saying why; a backend asked for by name fails with the error."""
+    """`run(backend)` and the backend it ran on. Under "auto", a program the C translator lacks a primitive of (a
+    ConfigError naming `native`) runs with JAX, and a program JAX cannot trace (a ConfigError naming
+    `simulation.backend`, e.g. a user's law written with numpy calls) with numpy, each with a warning saying why; a
+    backend asked for by name fails with the error."""
     try:
         return run(backend), backend
     except ConfigError as exc:
-        if asked != "auto" or backend == "numpy" or exc.field != "simulation.backend":
+        if asked != "auto" or backend == "numpy" or exc.field not in ("simulation.backend", "native"):
             raise
+        if exc.field == "native":
+            warnings.warn(f"{exc.reason.split(':')[0]}; compiled with JAX instead (simulation.backend = 'auto')",
+                          NotTraceableWarning, stacklevel=3)
+            return run_on(asked, "jax", run)
         why = exc.reason.removesuffix("; use backend = 'numpy'")
         warnings.warn(f"{why}; stepped with numpy instead (simulation.backend = 'auto'): slower, same numbers — "
                       "docs/tutorial.md#traceable", NotTraceableWarning, stacklevel=3)
@@ -66,8 +77,8 @@ def run_on(asked: str, backend: str, run: Callable[[str], T]) -> tuple[T, str]:
 @dataclass(frozen=True)
 class RK4:
     """Classic fixed-step Runge–Kutta 4 with step `dt` (s), stepped by numpy or compiled by JAX
-    (:mod:`robotadapt.sim.compiled`; the same step, equal to round-off): `backend` "auto" (default: compiled unless the
-    run is short, :func:`choose_backend`), "numpy" or "jax"."""
+    (:mod:`robotadapt.sim.compiled`) or translated to C (:mod:`robotadapt.native`; the same step, equal to round-off):
+    `backend` "auto" (default: compiled unless the run is short, :func:`choose_backend`), "numpy", "jax" or "c"."""
 
     dt: float = 1e-3
     backend: str = "auto"
@@ -130,7 +141,7 @@ class Sampled:
     control_period: float
     dt: Any = None  # the plant's step (s): a float once constructed
     discretization: str = "euler"
-    backend: str = "auto"  # as for RK4: "auto", "numpy" or "jax"
+    backend: str = "auto"  # as for RK4: "auto", "numpy", "jax" or "c"
     substeps: int = field(init=False)
 
     def __post_init__(self) -> None:

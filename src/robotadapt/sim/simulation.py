@@ -188,7 +188,8 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
             name = "simulation.control_period" if sampled else "simulation.dt"
             raise ConfigError(name, f"{n_steps:.3g} steps would keep a {log_bytes / 1e9:.3g} GB log; "
                               f"use a larger {name.split('.')[1]} or simulation.log_every")
-        backend = choose_backend(integrator.backend, n_steps, plant.model.traceable and controller.model.traceable)
+        backend = choose_backend(integrator.backend, n_steps, plant.model.traceable and controller.model.traceable,
+                                 single=True)
 
         def run(backend: str) -> tuple[Array, Array, Status, dict[str, Array] | None]:
             if isinstance(integrator, Sampled):
