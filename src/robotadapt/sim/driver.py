@@ -347,7 +347,7 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
         arrays = [jnp.asarray(a) for a in _leaves(transition)]
         shape, axes = _runs_shape(carry), None
     one = transition if mapped is None else runs[0]
-    static = (skeleton(one.program_key(), []), log_every, axes)
+    static = (skeleton(one.program_key(), []), log_every, axes) if native else None  # what the C program is
     probe = feed(0, 1)
     step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe))
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
