@@ -4,11 +4,14 @@ and XLA's differ in the last bits); a primitive it lacks is one line naming it."
 
 from __future__ import annotations
 
+import re
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from robotadapt.native import c99
 from robotadapt.native.build import compiled, compiler
 from robotadapt.native.c99 import PRIMITIVES, Unsupported, translate
 
@@ -151,8 +154,27 @@ def test_a_program_called_repeatedly_is_one_c_function():
 
     z, h = RNG.normal(size=3), 0.01
     text = _source(rk4, z, h)
-    assert text.count("static void f_f") == 1 and text.count("f_f0(") - 1 == 4  # defined once, called four times
+    names = re.findall(r"static void (f_f\d+)\(", text)
+    assert len(names) == 1 and text.count(f"{names[0]}(") - 1 == 4  # defined once, called four times
     assert "static void f_f" not in _source(lambda z, h: rate(z, h), z, h)
     with jax.enable_x64(True):
         expected = rk4(jnp.asarray(z), h)
     np.testing.assert_allclose(compiled(rk4, z, h)(z, h)[0], np.asarray(expected), rtol=1e-12, atol=1e-14)
+
+
+def test_functions_inside_functions_have_their_own_names(monkeypatch):
+    """A repeatedly called program that itself calls another repeatedly: two C functions, distinct names, JAX's
+    result (the size threshold lowered so that small programs show it)."""
+    monkeypatch.setattr(c99, "FUNCTION_MIN", 3)
+    inner = jax.jit(lambda z: jnp.tanh(jnp.outer(z, z) @ z) + jnp.cumsum(jnp.sin(z)) * jnp.cos(z).sum())
+    outer = jax.jit(lambda z: inner(z) + 2 * inner(z[::-1]) + jnp.exp(-z * z))
+
+    def fn(z):
+        return outer(z) - outer(2 * z)
+
+    z = RNG.normal(size=3)
+    names = re.findall(r"static void (f_f\d+)\(", _source(fn, z))
+    assert len(names) == 2 and len(set(names)) == 2
+    with jax.enable_x64(True):
+        expected = fn(jnp.asarray(z))
+    np.testing.assert_allclose(compiled(fn, z)(z)[0], np.asarray(expected), rtol=1e-12, atol=1e-12)

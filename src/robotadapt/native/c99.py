@@ -739,7 +739,7 @@ class Translator:
     def _function(self, closed: Any, ins: list[Ref], outs: list) -> tuple[str, list[int]]:
         """`static void NAME(const T *a0, …, T *r0, …)` computing `closed` on arguments shaped like `ins`, written to the
         emitter's functions: (NAME, the outputs it writes: those read)."""
-        name = f"{self.em.tag}_f{len(self.em.defined)}"
+        name = self.em.fresh(f"{self.em.tag}_f")  # unique: a function defined inside this one is named first
         sub = self.em.nested()
         args = [Ref(f"a{k}", r.shape, r.dtype) for k, r in enumerate(ins)]
         values = Translator(sub).run(closed.jaxpr, closed.consts, args, self.used)
