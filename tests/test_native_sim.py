@@ -11,9 +11,14 @@ import numpy as np
 import pytest
 
 from robotadapt.cli import main
+from robotadapt.controllers import InertiaRelated
 from robotadapt.native.build import compiler
+from robotadapt.plant import Plant
+from robotadapt.robots import TwoLinkArm
+from robotadapt.sim import RK4, simulate
 from robotadapt.sim.batch import simulate_batch
 from robotadapt.studies.scenarios import load
+from robotadapt.trajectories import Reference, constant, exponential_step, quintic, sum_of_sines
 
 pytestmark = pytest.mark.skipif(compiler() is None, reason="no C compiler (set CC or install gcc)")
 
@@ -99,3 +104,56 @@ def test_a_users_class_is_part_of_the_stored_programs_key(tmp_path, monkeypatch)
     (tmp_path / "mylaw.py").write_text("class Law:\n    gain = 2.0\n")
     assert _stable(key) != first
     assert _stable(((mylaw.Law, (("f", ("id", 1234)),)), 10, None)) is None
+
+
+TRAJECTORIES = {
+    "sum of sines": lambda: sum_of_sines(2, [[0.5, 0.2], [0.3, 0.4]], [1.0, 2.5], phase=[[0.1, 0.0], [0.0, 0.7]],
+                                         offset=[0.1, -0.2]),
+    "exponential step": lambda: exponential_step(2, final=[1.0, -0.5], rate=[2.0, 3.0]),
+    "quintic": lambda: quintic(2, [0.0, 0.2], [1.0, -0.8], t0=0.2, t1=0.9),
+    "constant": lambda: constant(2, [0.3, -0.2]),
+}
+
+
+def _two_link_run(trajectory, backend, log_every):
+    arm = TwoLinkArm()
+    ctrl = InertiaRelated(arm, Lam=2.5, Kv=10.0, Gamma=20.0, phi_hat0=[0.0, 0.0])
+    return simulate(Plant(arm, [0.8, 2.3]), ctrl, trajectory, t_final=1.0, integrator=RK4(1e-3, backend),
+                    log_every=log_every)
+
+
+def _state(result):
+    return np.concatenate([result.q, result.dq, result.x], axis=1)
+
+
+@pytest.mark.parametrize("kind", list(TRAJECTORIES))
+@pytest.mark.parametrize("log_every", [1, 7])
+def test_the_reference_evaluated_inside_the_c_program_equals_the_fed_one(kind, log_every):
+    """A package trajectory is evaluated by the C program itself, at k·dt, (k + ½)·dt and (k + 1)·dt (RK4Step's
+    `trajectory`); the numpy loop is fed the reference sampled in Python. The runs agree to round-off, logged rows
+    included (log_every = 1: a program whose padded steps are skipped by a branch, not computed)."""
+    c, ref = (_two_link_run(TRAJECTORIES[kind](), b, log_every) for b in ("c", "numpy"))
+    assert c.info["backend"] == "c" and c.t.shape == ref.t.shape == (1000 // log_every + 1,)
+    np.testing.assert_allclose(_state(c), _state(ref), rtol=0, atol=1e-12)
+    assert np.ptp(c.q, axis=0).min() > 0.05  # the arm follows a reference that moves it
+
+
+def test_a_users_trajectory_is_fed_and_its_kind_shares_a_program():
+    """A trajectory from outside the package is sampled in Python and fed (the program cannot know it is traceable);
+    two package trajectories of one kind and shape share one program (their arrays are its arguments)."""
+    from robotadapt.sim import driver
+
+    class Mine:
+        n = 2
+
+        def __call__(self, t):
+            t = np.asarray(t, dtype=float)[..., None]
+            return Reference(np.sin(t) + 0.0 * np.ones(2), np.cos(t) + 0.0 * np.ones(2), -np.sin(t) + 0.0 * np.ones(2))
+
+    c, ref = (_two_link_run(Mine(), b, 1) for b in ("c", "numpy"))
+    np.testing.assert_allclose(_state(c), _state(ref), rtol=0, atol=1e-12)
+    _two_link_run(sum_of_sines(2, 0.5, 1.0), "c", 1)
+    before = set(driver.NATIVE)
+    other = _two_link_run(sum_of_sines(2, 0.9, 2.0), "c", 1)
+    assert set(driver.NATIVE) == before
+    np.testing.assert_allclose(other.q_des[-1], 0.9 * np.sin(2.0 * other.t[-1]), rtol=0, atol=1e-12)

@@ -233,3 +233,9 @@ def quintic(n: int, q0: Any, q1: Any, t0: Any = 0.0, t1: Any = 1.0) -> Quintic:
 
 def constant(n: int, value: Any) -> Constant:
     return Constant(as_vector(value, n, "trajectory.value"))
+
+
+def traceable(trajectory: Trajectory) -> bool:
+    """Whether `trajectory` is one of the trajectories here, written in the array API of `t`: a compiled program can
+    evaluate it itself (:class:`robotadapt.sim.loop.RK4Step`). A user's is sampled in Python and fed."""
+    return type(trajectory) in (SumOfSines, ExponentialStep, Quintic, Constant)

@@ -177,12 +177,13 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
 PROGRAMS: dict[Any, tuple[Any, Callable[..., Any]]] = {}  # compiled programs by (skeleton, log_every, mapping)
 
 
-def _program(transition: Any, log_every: int, mapped: Any) -> Callable[..., Any]:
+def _program(transition: Any, log_every: int, mapped: Any, native: bool = False) -> Callable[..., Any]:
     """The jitted scan over blocks of `log_every` steps for transitions shaped like this one (`mapped`: vmapped over
     runs, None: not). `run(arrays, state, xs, n)` scans the blocks of `xs` (`(blocks, log_every, ...)`), keeps each
     block's first record and its validity, and computes no step after n (the padding of the last call). The entry
-    holds its template, so that ids in a key stay valid."""
-    key = (skeleton(transition.program_key(), []), log_every, mapped)
+    holds its template, so that ids in a key stay valid. `native`: the program to translate to C, where a padded step
+    is skipped by a branch (XLA computes it and judges it as nothing: cheaper there than a loop of one)."""
+    key = (skeleton(transition.program_key(), []), log_every, mapped, native)
     if key in PROGRAMS:
         return PROGRAMS[key][1]
     jax = jax_module()
@@ -204,7 +205,7 @@ def _program(transition: Any, log_every: int, mapped: Any) -> Callable[..., Any]
                 return state, (record, ok)
 
             count = jnp.clip(n + 1 - xs.k[0], 0, xs.k.shape[0])  # the padding after step n: not computed
-            if xs.k.shape[0] == 1:  # log_every = 1: the block is its step (past n, padding: judged as nothing)
+            if xs.k.shape[0] == 1 and not native:  # log_every = 1: the block is its step (padding: judged as nothing)
                 return one(state, map_tree(lambda a: a[0], xs))
 
             def body(i: Array, carried: Any) -> Any:  # one copy of the step in the program: its record kept at i = 0
@@ -368,7 +369,7 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
         xs = xs._replace(k=np.arange(first * log_every, first * log_every + size))
         xs = _blocked(xs, mapped, per_call, log_every)
         if native:
-            state, (record, ok) = _native(lambda: _program(one, log_every, axes), static, arrays, state, xs, n)
+            state, (record, ok) = _native(lambda: _program(one, log_every, axes, True), static, arrays, state, xs, n)
         else:
             state, (record, ok) = _program(one, log_every, axes)(arrays, state, xs, n)
         move = partial(_rows, keep=min(per_call, blocks - first), runs_first=mapped is not None)

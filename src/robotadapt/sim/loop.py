@@ -256,12 +256,13 @@ def step(loop: ClosedLoop, k: Any, t: Any, z: Array, line: Ring | None, dt: floa
 
 class StepInputs(NamedTuple):
     """What fixed step k takes from outside: k and the reference at t_k, t_k + dt/2, t_k + dt (t_k = k·dt is computed
-    in the step: fed as an input, it costs the compiled step half as much again, measured on Example 6.3.1)."""
+    in the step: fed as an input, it costs the compiled step half as much again, measured on Example 6.3.1). None: the
+    step evaluates its own trajectory (:attr:`RK4Step.trajectory`)."""
 
     k: Array
-    r0: Reference
-    rh: Reference
-    r1: Reference
+    r0: Reference | None
+    rh: Reference | None
+    r1: Reference | None
 
 
 @dataclass(frozen=True, eq=False)
@@ -270,15 +271,22 @@ class RK4Step:
     delay line or None), inputs (k, the reference at t_k, t_k + dt/2, t_k + dt); the record is the state applied
     over step k (what the log at t_k holds); the verdict is the divergence guard on z_{k+1} (codes of `REASONS`: a stop
     at t_k + dt) or a guarded law's guard failing in a stage (GUARD: a stop within the step, with the law's reason at
-    the stage state where it failed)."""
+    the stage state where it failed).
+
+    `trajectory`: the reference the step evaluates itself, at k·dt, (k + ½)·dt and (k + 1)·dt, the instants the feed
+    would sample (a compiled single run: inside the program, the reference is three evaluations a step in C, not
+    arrays of 2n + 1 instants computed and copied in Python); None: fed."""
 
     loop: ClosedLoop
     dt: float
     max_state: float
+    trajectory: Trajectory | None = None
 
     def __call__(self, carry: tuple[Array, Ring | None], inputs: StepInputs,
                  rate: Rate | None = None) -> tuple[tuple[Array, Ring | None], Array, Verdict]:
         k, r0, rh, r1 = inputs
+        if self.trajectory is not None:
+            r0, rh, r1 = (self.trajectory(self.dt * (k + h)) for h in (0.0, 0.5, 1.0))
         s = step(self.loop, k, k * self.dt, carry[0], carry[1], self.dt, r0, rh, r1, rate)
         why = self.loop.divergence(s.z, self.max_state)
         if s.ok is not None:
@@ -302,8 +310,11 @@ class RK4Step:
 
     def feed(self, trajectory: Trajectory, runs: bool = False) -> Callable[[int, int], Any]:
         """The inputs of steps first … first + count − 1: the reference at each step's three stage instants in one
-        vectorized call (`runs`: a merged trajectory with a run axis, sampled on `(times, 1)`)."""
+        vectorized call (`runs`: a merged trajectory with a run axis, sampled on `(times, 1)`); the step indices only
+        where the step holds the trajectory."""
         def inputs(first: int, count: int) -> Any:
+            if self.trajectory is not None:
+                return StepInputs(np.arange(first, first + count), None, None, None)
             times = self.dt * (first + 0.5 * np.arange(2 * count + 1))
             ref = trajectory(times[:, None] if runs else times)
             k = np.arange(first, first + count)

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..controllers.base import Controller, HasDelayLine, NeedsAcceleration, Prepares
 from ..plant.plant import Plant, same_model
-from ..trajectories import Trajectory
+from ..trajectories import Trajectory, traceable
 from ..validation import ConfigError, as_scalar, as_vector
 from .driver import drive
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend, run_on
@@ -34,7 +34,8 @@ def _fixed(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: in
     """Fixed-step RK4 from t = 0 through the one driver (:class:`~robotadapt.sim.loop.RK4Step`); returns logged (t, z)
     and the status. The log at t_k holds the state applied over step k (with a delay line, x as read from it); the last
     sample, at t_final, is logged, not integrated."""
-    rk4 = RK4Step(loop, dt, max_state)
+    inside = backend == "c" and traceable(traj)  # the C program evaluates the reference itself
+    rk4 = RK4Step(loop, dt, max_state, traj if inside else None)
     carry = (z0, None if line is None else Ring.start(line.buffer))
     trace = drive([rk4], [carry], rk4.feed(traj), n_steps, log_every, backend=backend, progress=progress)
     z = trace.records[:, 0]
