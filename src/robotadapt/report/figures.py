@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 
 from ..files import writable_dir  # noqa: E402
 from ..studies.compare import number_text  # noqa: E402
-from .output import PNG, FigureFormat, save_figure  # noqa: E402
+from .output import DEFAULT_DPI, PNG, FigureFormat, save_figure  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -156,7 +156,10 @@ def positive(y: np.ndarray) -> np.ndarray:
 
 
 def _panels(k: int, height: float = 2.6) -> tuple[Figure, list[Any]]:
-    fig, axes = plt.subplots(k, 1, figsize=(7, 1.4 + height * k), sharex=True, squeeze=False)
+    """k stacked panels sharing time, laid out at the dpi they are written at (matplotlib parses each mathtext label
+    once per dpi: laid out at another, every label is parsed twice, a third of a fresh `robotadapt run`'s figure
+    time)."""
+    fig, axes = plt.subplots(k, 1, figsize=(7, 1.4 + height * k), sharex=True, squeeze=False, dpi=DEFAULT_DPI)
     return fig, list(axes[:, 0])
 
 
