@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 
@@ -284,9 +284,11 @@ class RK4Step:
 
     def __call__(self, carry: tuple[Array, Ring | None], inputs: StepInputs,
                  rate: Rate | None = None) -> tuple[tuple[Array, Ring | None], Array, Verdict]:
-        k, r0, rh, r1 = inputs
+        k = inputs.k
         if self.trajectory is not None:
             r0, rh, r1 = (self.trajectory(self.dt * (k + h)) for h in (0.0, 0.5, 1.0))
+        else:
+            r0, rh, r1 = cast(tuple[Reference, Reference, Reference], inputs[1:])
         s = step(self.loop, k, k * self.dt, carry[0], carry[1], self.dt, r0, rh, r1, rate)
         why = self.loop.divergence(s.z, self.max_state)
         if s.ok is not None:
