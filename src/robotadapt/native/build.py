@@ -96,13 +96,15 @@ class Compiled:
         self._fn.restype = None
 
     @classmethod
-    def translated(cls, closed: Any, name: str = "program", field: str = "simulation.backend") -> Compiled:
-        """A ClosedJaxpr translated to C (:func:`robotadapt.native.c99.translate`) and built (:func:`shared_library`)."""
+    def translated(cls, closed: Any, name: str = "program", field: str = "simulation.backend",
+                   zeros: Sequence[np.ndarray | None] = ()) -> Compiled:
+        """A ClosedJaxpr translated to C (:func:`robotadapt.native.c99.translate`; `zeros`: the inputs' elements that
+        are zero in every call) and built (:func:`shared_library`)."""
         jaxpr = closed.jaxpr
         ins = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.invars]
         outs = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.outvars]
         types = [c_type(d) for _, d in ins + outs]
-        source = PRELUDE + translate(closed, f"{name}_impl") + entry(name, len(ins), len(outs), types)
+        source = PRELUDE + translate(closed, f"{name}_impl", zeros=zeros) + entry(name, len(ins), len(outs), types)
         return cls(shared_library(source, field), name, ins, outs)
 
     def __call__(self, *args: Any) -> list[np.ndarray]:

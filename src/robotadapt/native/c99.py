@@ -18,6 +18,7 @@ out-of-range windows as their mode says.
 from __future__ import annotations
 
 import itertools
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -25,12 +26,22 @@ from typing import Any
 import numpy as np
 
 from ..validation import ConfigError
+from . import elements
+from .elements import Scalars, literal, text
 
 STACK_LIMIT = 4096  # a temporary with more elements than this is a static array
 FUNCTION_MIN = 50  # a nested program of at least this many equations, called more than once, is a C function
 CALLS = ("pjit", "jit", "closed_call", "core_call")
 C_TYPES = {"float64": "double", "float32": "float", "int64": "int64_t", "int32": "int32_t", "int16": "int16_t",
            "int8": "int8_t", "uint64": "uint64_t", "uint32": "uint32_t", "uint8": "uint8_t", "bool": "uint8_t"}
+
+
+# primitives whose results may be held as elements (:meth:`Translator.held`), besides the elementwise ones
+MOVES = ("reshape", "squeeze", "expand_dims", "copy", "copy_p", "reduce_precision", "convert_element_type",
+         "broadcast_in_dim", "slice", "rev", "transpose", "concatenate", "stack", "split", "pad")
+# primitives that pass their operands on to nested programs (which may read held values) rather than loop over them
+NESTING = (*CALLS, "custom_jvp_call", "custom_vjp_call", "custom_vjp_call_jaxpr", "remat", "checkpoint",
+           "custom_linear_solve", "while", "scan", "cond")
 
 
 class Unsupported(ConfigError):
@@ -52,6 +63,9 @@ class Ref:
     dtype: str
     scalar_expr: bool = False
     view: Callable[[list[str]], str] | None = None
+    value: np.ndarray | None = None  # a constant's value
+    zeros: np.ndarray | None = None  # an argument's elements known to be zero (a structural zero of a gain or table)
+    elems: np.ndarray | None = None  # a value held as elements (:mod:`.elements`): no buffer, no view
 
     @property
     def size(self) -> int:
@@ -63,14 +77,33 @@ class Ref:
 
     def get(self, index: Sequence[str]) -> str:
         """The element at the multi-index `index` (C expressions, one per dimension)."""
+        if self.elems is not None:  # a static position only: the translator stores elements before a loop reads them
+            return text(self.elems[tuple(int(i) for i in index)])
         if self.scalar_expr:
             return self.name
         if self.view is not None:
             return self.view(list(index))
         return f"{self.name}[{linear(self.shape, index) if self.shape else '0'}]"
 
+    def elements(self) -> np.ndarray:
+        """The elements (:mod:`.elements`): held ones, a constant's values, else the C text of each."""
+        if self.elems is not None:
+            return self.elems
+        out = np.empty(self.shape, dtype=object)
+        if self.value is not None:
+            out[...] = np.asarray(self.value).tolist() if self.shape else np.asarray(self.value).item()
+            return out
+        plain = self.view is None and not self.scalar_expr
+        for flat, ix in enumerate(np.ndindex(*self.shape)):
+            out[ix] = f"{self.name}[{flat}]" if plain else self.get([str(i) for i in ix])
+        if self.zeros is not None:
+            out[self.zeros] = 0.0
+        return out
+
     def at(self, index: str) -> str:
         """The element at the flat `index` (a rank-0 value ignores it)."""
+        if self.elems is not None:
+            return text(self.elems.flat[int(index)])
         if self.scalar_expr:
             return self.name
         if self.view is not None:
@@ -96,23 +129,6 @@ def c_type(dtype: Any) -> str:
     if name not in C_TYPES:
         raise Unsupported(f"C type for dtype {name}")
     return C_TYPES[name]
-
-
-def literal(value: Any, dtype: Any) -> str:
-    """A C literal of `value` in `dtype` (exact for doubles: 17 significant digits)."""
-    kind = np.dtype(dtype).kind
-    if kind == "b":
-        return "1" if bool(value) else "0"
-    if kind in "iu":
-        whole = int(value)
-        return f"INT64_C({whole})" if abs(whole) > 2**31 - 1 else str(whole)
-    v = float(value)
-    if np.isnan(v):
-        return "NAN"
-    if np.isinf(v):
-        return "INFINITY" if v > 0 else "(-INFINITY)"
-    text = repr(v)
-    return text if any(c in text for c in ".en") else text + ".0"
 
 
 def strides(shape: Sequence[int]) -> list[int]:
@@ -150,6 +166,10 @@ class Emitter:
     functions: list[str] = field(default_factory=list)  # file-scope C functions of nested programs called repeatedly
     defined: dict[Any, tuple[str, list[int]]] = field(default_factory=dict)  # their names and kept outputs, by call
     calls: dict[int, int] = field(default_factory=dict)  # how often each nested program is called (:func:`_calls`)
+    scalars: Scalars = field(init=False)  # the arithmetic of values held as elements
+
+    def __post_init__(self) -> None:
+        self.scalars = Scalars(self.emit, self.fresh)
 
     def nested(self) -> Emitter:
         """An emitter for a function of its own, sharing this one's names, constants and functions."""
@@ -170,9 +190,11 @@ class Emitter:
         array = np.asarray(value)
         ref = Ref(self.fresh(f"{self.tag}_c"), array.shape, array.dtype.name)
         if array.ndim == 0:
-            return Ref(f"(({ref.ctype}){literal(array, array.dtype)})", (), array.dtype.name, scalar_expr=True)
+            return Ref(f"(({ref.ctype}){literal(array, array.dtype)})", (), array.dtype.name, scalar_expr=True,
+                       value=array)
         items = ", ".join(literal(x, array.dtype) for x in array.ravel()) or "0"
         self.consts.append(f"static const {ref.ctype} {ref.name}[{max(array.size, 1)}] = {{{items}}};")
+        ref.value = array
         return ref
 
     def emit(self, line: str) -> None:
@@ -238,6 +260,8 @@ BINARY: dict[str, Callable[[str, str, Ref], str]] = {
 }
 # the total-order comparisons (sorting keys): the plain ones, which agree with them on every number but signed zeros
 BINARY.update({f"{op}_to": BINARY[op] for op in ("eq", "lt", "le")})
+HELD = frozenset([*UNARY, *BINARY, *MOVES, "dot_general", "reduce_sum", "reduce_max", "reduce_min", "cumsum",
+                  "integer_pow", "select_n", "clamp"])
 
 
 def live(jaxpr: Any, used: Sequence[bool] | None = None) -> list[tuple[Any, list[bool]]]:
@@ -319,6 +343,15 @@ class Translator:
         name = eqn.primitive.name
         handler = getattr(self, "p_" + name.replace("-", "_"), None)
         outs = [(tuple(v.aval.shape), np.dtype(v.aval.dtype).name) for v in eqn.outvars]
+        known = self._known(eqn, ins, outs)
+        if known is not None:
+            return [self.em.constant(v) for v in known]
+        if self._held(name, ins, outs, eqn.params):
+            values = self.held(name, ins, outs, eqn.params)
+            return [Ref("", shape, dtype, elems=np.asarray(v, dtype=object).reshape(shape))
+                    for v, (shape, dtype) in zip(values, outs, strict=True)]
+        if name not in NESTING:  # a loop nest reads buffers and views: held values are stored first
+            ins = [self.materialize(r) if r.elems is not None else r for r in ins]
         if name in UNARY:
             return [self.elementwise(lambda x: UNARY[name](x[0], ins[0]), ins, outs[0])]
         if name in BINARY:
@@ -327,6 +360,115 @@ class Translator:
             raise Unsupported(f"primitive '{name}'")
         result = handler(ins, outs, **eqn.params)
         return result if isinstance(result, list) else [result]
+
+    # -- values held as elements (:mod:`.elements`) ---------------------------------------------------------------------
+
+    @staticmethod
+    def _known(eqn: Any, ins: list[Ref], outs: list) -> list[np.ndarray] | None:
+        """The results of an equation on constants only (an identity matrix built from iota, a mask), small: computed
+        now by JAX, so that they fold; None otherwise."""
+        if (eqn.primitive.name in NESTING or eqn.effects or sum(int(np.prod(shape)) for shape, _ in outs) > elements.LIMIT
+                or any(not (r.value is not None or r.elems is not None and all(map(elements.known, r.elems.flat)))
+                       for r in ins)):
+            return None
+        import jax
+
+        values = [r.value if r.value is not None else np.array(r.elements().tolist(), dtype=r.dtype) for r in ins]
+        with jax.enable_x64(True):
+            got = eqn.primitive.bind(*[np.asarray(v, dtype=r.dtype) for v, r in zip(values, ins, strict=True)],
+                                     **eqn.params)
+        got = got if eqn.primitive.multiple_results else [got]
+        return [np.asarray(v, dtype=dtype).reshape(shape) for v, (shape, dtype) in zip(got, outs, strict=True)]
+
+    @staticmethod
+    def _held(name: str, ins: list[Ref], outs: list, params: dict[str, Any]) -> bool:
+        """Whether the equation's results are held as elements: a primitive :meth:`held` has, float64 results of at most
+        `elements.LIMIT` elements, computed from at most `elements.WORK` terms."""
+        # a move of a value whose elements are known in part (held, constant, with zeros) keeps them up to WORK
+        limit = elements.WORK if name in MOVES and (ins[0].elems is not None or ins[0].value is not None or
+                                                    ins[0].zeros is not None) else elements.LIMIT
+        if name not in HELD or any(dtype != "float64" or int(np.prod(shape)) > limit for shape, dtype in outs):
+            return False
+        if name == "dot_general":
+            (lc, _), _ = params["dimension_numbers"]
+            work = int(np.prod(outs[0][0])) * int(np.prod([ins[0].shape[d] for d in lc]))
+        else:
+            work = max([int(np.prod(r.shape)) for r in ins] + [int(np.prod(shape)) for shape, _ in outs])
+        return work <= elements.WORK
+
+    def held(self, name: str, ins: list[Ref], outs: list, params: dict[str, Any]) -> list[np.ndarray]:
+        """The results, as elements, of primitive `name` on the operands' elements."""
+        sc, shape, xs = self.em.scalars, outs[0][0], [r.elements() for r in ins]
+        ref = Ref("", shape, "float64")
+        if name in UNARY:
+            if name == "neg":
+                return [elements.elementwise(shape, xs, sc.neg)]
+            return [elements.elementwise(shape, xs, lambda a: sc.apply(name, lambda t: UNARY[name](t[0], ref), [a]))]
+        if name in BINARY:
+            return [elements.elementwise(shape, xs, lambda a, b: sc.binary(name, lambda x, y: BINARY[name](x, y, ref),
+                                                                          a, b))]
+        x = xs[0]
+        if name in ("reshape", "squeeze", "expand_dims", "copy", "copy_p", "reduce_precision"):
+            if params.get("dimensions") is not None and name == "reshape":
+                x = x.transpose(params["dimensions"])
+            return [x.reshape(shape)]
+        if name == "convert_element_type":  # to float64 (a held result is float64)
+            return [x if ins[0].dtype == "float64" else elements.elementwise(shape, [x], lambda a: float(a) if
+                    elements.known(a) else sc.apply("double", lambda t: f"(double)({t[0]})", [a]))]
+        if name == "broadcast_in_dim":
+            return [elements.broadcast_in_dim(x, shape, params["broadcast_dimensions"])]
+        if name == "slice":
+            step = params.get("strides") or [1] * x.ndim
+            return [x[tuple(slice(s, e, k) for s, e, k in zip(params["start_indices"], params["limit_indices"], step,
+                                                              strict=True))]]
+        if name == "rev":
+            return [np.flip(x, tuple(params["dimensions"]))]
+        if name == "transpose":
+            return [x.transpose(params["permutation"])]
+        if name == "concatenate":
+            return [np.concatenate(xs, axis=params["dimension"])]
+        if name == "stack":
+            return [np.stack(xs, axis=params["axis"])]
+        if name == "split":
+            cuts = np.cumsum(params["sizes"])[:-1]
+            return list(np.split(x, cuts, axis=params["axis"]))
+        if name == "pad":
+            return [elements.pad(x, xs[1].item(), shape, params["padding_config"])]
+        if name == "dot_general":
+            return [elements.dot_general(sc, x, xs[1], shape, params["dimension_numbers"])]
+        if name == "reduce_sum":
+            return [elements.reduce(x, params["axes"], shape, lambda row: sc.total((e, None) for e in row))]
+        if name in ("reduce_max", "reduce_min"):
+            op = name[7:]
+
+            def fold(row: np.ndarray) -> Any:
+                acc = row[0]
+                for e in row[1:]:
+                    acc = sc.binary(op, lambda a, b: BINARY[op](a, b, ref), acc, e)
+                return acc
+
+            return [elements.reduce(x, params["axes"], shape, fold)]
+        if name == "cumsum":
+            return [elements.cumulative(x, params["axis"], params.get("reverse", False),
+                                        lambda a, b: sc.binary("add", lambda p, q: BINARY["add"](p, q, ref), a, b))]
+        if name == "integer_pow":
+            y = params["y"]
+            return [elements.elementwise(shape, [x], lambda a: elements._number(lambda v: v ** y, a)
+                                         if elements.known(a) else sc.apply(f"pow{y}", lambda t: "*".join(
+                                             [f"{t[0]}"] * y) if y > 0 else f"1.0/({'*'.join([t[0]] * -y) or '1.0'})",
+                                             [a]))]
+        if name == "select_n":
+            def pick(pred: Any, *cases: Any) -> Any:
+                if elements.known(pred):
+                    return cases[min(max(int(pred), 0), len(cases) - 1)]
+                return sc.apply("select", lambda t: self._select(t[0], t[1:]), [pred, *cases])
+
+            return [elements.elementwise(shape, xs, pick)]
+        if name == "clamp":
+            return [elements.elementwise(shape, xs, lambda lo, v, hi: sc.apply(
+                "clamp", lambda t: f"(({t[1]}) < ({t[0]}) ? ({t[0]}) : ({t[1]}) > ({t[2]}) ? ({t[2]}) : ({t[1]}))",
+                [lo, v, hi]))]
+        raise AssertionError(name)
 
     # -- helpers ----------------------------------------------------------------------------------------------------------
 
@@ -346,6 +488,8 @@ class Translator:
         """The same elements under another shape (no copy): a buffer renamed, a view whose dimensions other than size 1
         are kept re-indexed, another view materialised first."""
         shape, dtype = out
+        if ref.elems is not None:
+            return Ref("", shape, dtype, elems=ref.elems.reshape(shape))
         if ref.scalar_expr:
             return Ref(ref.name, shape, dtype, scalar_expr=True)
         if ref.view is None:
@@ -364,14 +508,30 @@ class Translator:
         return Ref(ref.name, shape, dtype, view=view)
 
     def materialize(self, ref: Ref) -> Ref:
-        """A buffer holding a view's elements (a buffer or scalar as it is)."""
+        """A buffer holding a view's elements or held elements (stored once in a block), a buffer or scalar as it is."""
+        if ref.elems is not None:
+            key = ("buffer", id(ref))
+            found = self.em.scalars.find(key)
+            if found is None:
+                found = (self.stored(ref), ref)  # the ref kept alive: its id is not reused
+                self.em.scalars.keep(key, found)
+            return found[0]
         return ref if ref.view is None else self.gathered(ref.shape, ref.dtype, ref.get)
+
+    def stored(self, ref: Ref) -> Ref:
+        """A new buffer initialised with held elements."""
+        out = Ref(self.em.fresh(), ref.shape, ref.dtype)
+        items = ", ".join(text(e) for e in ref.elements().flat) if ref.size else "0"
+        self.em.emit(f"{out.ctype} {out.name}[{max(ref.size, 1)}] = {{{items}}};")
+        return out
 
     def viewed(self, x: Ref, out: tuple[tuple[int, ...], str], index: Callable[[list[str]], list[str]]) -> Ref:
         """A view of `x`: the element at multi-index ix is x's at `index(ix)`."""
         return Ref(x.name, out[0], out[1], view=lambda ix: x.get(index(ix)))
 
     def copy(self, ref: Ref) -> Ref:
+        if ref.elems is not None:
+            return self.stored(ref)
         if ref.view is not None:
             return self.materialize(ref)
         out = self.em.buffer(ref.shape, ref.dtype)
@@ -379,7 +539,9 @@ class Translator:
         return out
 
     def gathered(self, shape: Sequence[int], dtype: str, source: Callable[[list[str]], str]) -> Ref:
-        """A new buffer of `shape` whose element at each multi-index is `source(index variables)`."""
+        """A new buffer of `shape` whose element at each multi-index is `source(index variables)` (no elements: none)."""
+        if 0 in shape:
+            return Ref("", tuple(shape), dtype, elems=np.empty(shape, dtype=object))
         ref = self.em.buffer(shape, dtype)
         self.em.loop(shape, lambda ix: [f"{ref.name}[{linear(shape, ix)}] = ({ref.ctype})({source(ix)});"])
         return ref
@@ -491,15 +653,16 @@ class Translator:
         shape, dtype = outs[0]
         return self.gathered(shape, dtype, lambda ix: ix[dimension])
 
-    def p_select_n(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
-        def expr(a: list[str]) -> str:  # case[pred]: a boolean picks case 1 when true, an integer its case
-            pred, cases = a[0], a[1:]
-            text = cases[-1]
-            for k in range(len(cases) - 2, -1, -1):
-                text = f"(({pred}) == {k} ? ({cases[k]}) : ({text}))"
-            return text
+    @staticmethod
+    def _select(pred: str, cases: Sequence[str]) -> str:
+        """case[pred]: a boolean picks case 1 when true, an integer its case."""
+        out = cases[-1]
+        for k in range(len(cases) - 2, -1, -1):
+            out = f"(({pred}) == {k} ? ({cases[k]}) : ({out}))"
+        return out
 
-        return self.elementwise(expr, ins, outs[0])
+    def p_select_n(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
+        return self.elementwise(lambda a: self._select(a[0], a[1:]), ins, outs[0])
 
     def p_clamp(self, ins: list[Ref], outs: list, **_: Any) -> Ref:
         return self.elementwise(lambda a: f"(({a[1]}) < ({a[0]}) ? ({a[0]}) : ({a[1]}) > ({a[2]}) ? ({a[2]}) : ({a[1]}))",
@@ -726,11 +889,12 @@ class Translator:
         translated once: a quarter of the text for gcc, the same arithmetic."""
         if self.em.calls.get(id(jaxpr), 0) < 2 or len(jaxpr.jaxpr.eqns) < FUNCTION_MIN:
             return self.call(jaxpr, ins)
-        key = (id(jaxpr), tuple(self.used), tuple((r.shape, r.dtype) for r in ins))
+        key = (id(jaxpr), tuple(self.used), tuple((r.shape, r.dtype, r.name if _inside(r) else None,
+                                                   None if r.zeros is None else r.zeros.tobytes()) for r in ins))
         if key not in self.em.defined:
             self.em.defined[key] = self._function(jaxpr, ins, outs)
         name, kept = self.em.defined[key]
-        pointers = [self._pointer(r) for r in ins]
+        pointers = [self._pointer(r) for r in ins if not _inside(r)]
         results = [self.em.buffer(*outs[k]) for k in kept]
         self.em.emit(f"{name}({', '.join(pointers + [r.name for r in results])});")
         found = dict(zip(kept, results, strict=True))
@@ -741,14 +905,16 @@ class Translator:
         emitter's functions: (NAME, the outputs it writes: those read)."""
         name = self.em.fresh(f"{self.em.tag}_f")  # unique: a function defined inside this one is named first
         sub = self.em.nested()
-        args = [Ref(f"a{k}", r.shape, r.dtype) for k, r in enumerate(ins)]
+        args = [r if _inside(r) else Ref(f"a{k}", r.shape, r.dtype, zeros=r.zeros) for k, r in enumerate(ins)]
         values = Translator(sub).run(closed.jaxpr, closed.consts, args, self.used)
         kept = [k for k, v in enumerate(values) if v is not UNUSED]
         returns = [Ref(f"r{k}", *outs[k]) for k in kept]
         for target, k in zip(returns, kept, strict=True):
             Translator(sub)._copy_into(target, values[k], "0", max(target.size, 1))
-        params = [f"const {a.ctype} *{a.name}" for a in args] + [f"{r.ctype} *{r.name}" for r in returns]
-        self.em.functions.append("\n".join([f"static void {name}({', '.join(params)}) {{", *sub.lines, "}", ""]))
+        params = [f"const {a.ctype} *{a.name}" for a in args if not _inside(a)] + [f"{r.ctype} *{r.name}"
+                                                                                    for r in returns]
+        self.em.functions.append("\n".join([f"static void {name}({', '.join(params)}) {{", *elements.prune(sub.lines),
+                                            "}", ""]))
         return name, kept
 
     def _pointer(self, ref: Ref) -> str:
@@ -791,6 +957,11 @@ class Translator:
 
     def _copy_into(self, target: Ref, value: Ref, offset: str, size: int) -> None:
         """target[offset + i] = value[i] for i < size."""
+        if value.elems is not None:
+            for i, e in enumerate(value.elems.flat):
+                self.em.emit(f"{target.name}[{offset} + {i}] = {text(e)};")
+            return
+
         def body(ix: list[str]) -> list[str]:
             return [f"{target.name}[{offset} + {ix[0]}] = {value.at(ix[0])};"]
 
@@ -799,7 +970,9 @@ class Translator:
     def _block(self, opening: str, fill: Callable[[], None]) -> None:
         self.em.emit(opening)
         self.em.depth += 1
+        self.em.scalars.open()
         fill()
+        self.em.scalars.close()
         self.em.depth -= 1
         self.em.emit("}")
 
@@ -847,7 +1020,9 @@ class Translator:
                 branches) - 1 else "} else {"
             self.em.emit(test)
             self.em.depth += 1
+            self.em.scalars.open()
             self._assign(results, Translator(self.em).run(branch.jaxpr, branch.consts, operands))
+            self.em.scalars.close()
             self.em.depth -= 1
         self.em.emit("}")
         return results
@@ -979,13 +1154,16 @@ PRIMITIVES = tuple(sorted({*UNARY, *BINARY, *(name[2:] for name in dir(Translato
 
 
 def translate(closed: Any, name: str, arg_names: Sequence[str] | None = None,
-              out_names: Sequence[str] | None = None) -> str:
+              out_names: Sequence[str] | None = None, zeros: Sequence[np.ndarray | None] = ()) -> str:
     """The C99 text of `static void name(const T *in…, T *out…)` computing the ClosedJaxpr `closed` (module
-    docstring); its constants become static arrays before the function."""
+    docstring); its constants become static arrays before the function. `zeros[k]`, where given, marks the elements of
+    input k that are zero in every call (the program is then valid only for such inputs)."""
     jaxpr = closed.jaxpr
     em = Emitter(tag=name, calls=_calls(jaxpr, {}))
-    args = [Ref(arg_names[k] if arg_names else f"in{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name)
-            for k, v in enumerate(jaxpr.invars)]
+    masks = [None if z is None or not np.any(z) else np.asarray(z, bool) for z in zeros]
+    masks += [None] * (len(jaxpr.invars) - len(masks))
+    args = [Ref(arg_names[k] if arg_names else f"in{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name,
+                zeros=None if masks[k] is None else masks[k].reshape(v.aval.shape)) for k, v in enumerate(jaxpr.invars)]
     translator = Translator(em)
     # a view may read an input that an output overwrites: views are stored before any output is written
     results = [translator.materialize(r) for r in translator.run(jaxpr, closed.consts, args)]
@@ -997,7 +1175,16 @@ def translate(closed: Any, name: str, arg_names: Sequence[str] | None = None,
 
         em.loop([max(out.size, 1)], copy)
     params = [f"const {a.ctype} *{a.name}" for a in args] + [f"{o.ctype} *{o.name}" for o in outs]
-    return "\n".join([*em.consts, *em.functions, f"static void {name}({', '.join(params)}) {{", *em.lines, "}", ""])
+    body = "\n".join([*em.functions, f"static void {name}({', '.join(params)}) {{", *elements.prune(em.lines), "}",
+                      ""])
+    used = set(re.findall(rf"\b{re.escape(name)}_c\d+\b", body))  # a constant read only as elements is not declared
+    return "\n".join([*(c for c in em.consts if c.split()[3].split("[")[0] in used), body])
+
+
+def _inside(ref: Ref) -> bool:
+    """Whether an operand of a nested program's C function is a constant array it reads in place (the model's
+    geometry, which JAX hoists out of the program as an operand) rather than an argument: its elements fold."""
+    return ref.value is not None and ref.shape != ()
 
 
 def _calls(jaxpr: Any, counts: dict[int, int]) -> dict[int, int]:

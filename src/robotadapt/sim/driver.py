@@ -249,12 +249,14 @@ def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: An
     from ..native import build
 
     leaves = [*arrays, *_flatten(state), *_flatten(xs), n]
-    key = (static, tuple((np.shape(a), np.asarray(a).dtype.str) for a in leaves))
+    zeros = [np.asarray(a) == 0 for a in arrays]  # structural zeros of gains and tables: folded by the translator
+    key = (static, tuple((np.shape(a), np.asarray(a).dtype.str) for a in leaves),
+           tuple(np.packbits(z).tobytes() for z in zeros))
     if key not in NATIVE:
         stable = _stable(key)
         found = build.remembered(stable) if stable is not None else None
         if found is None:
-            found = _translate(make(), (arrays, state, xs, n))
+            found = _translate(make(), (arrays, state, xs, n), zeros)
             if stable is not None:
                 build.remember(stable, *found)
         if len(NATIVE) >= MAX_PROGRAMS:
@@ -266,8 +268,9 @@ def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: An
 
 
 @float64
-def _translate(program: Any, args: tuple[Any, ...]) -> tuple[Any, Any]:
-    """(the C program of `program(*args)`, its outputs' layout: their tuples with each array's position instead)."""
+def _translate(program: Any, args: tuple[Any, ...], zeros: list[np.ndarray]) -> tuple[Any, Any]:
+    """(the C program of `program(*args)`, its outputs' layout: their tuples with each array's position instead);
+    `zeros`: the elements of the leading arguments (`args[0]`) that are zero in every call."""
     from ..native.build import Compiled
 
     jax = jax_module()
@@ -281,7 +284,7 @@ def _translate(program: Any, args: tuple[Any, ...]) -> tuple[Any, Any]:
     outputs = map_tree(lambda _: next(count), shapes)
     if next(count, None) is not None:
         raise ConfigError("simulation.backend", "the compiled loop's outputs hold more than tuples of arrays")
-    return Compiled.translated(closed, "chunk"), outputs
+    return Compiled.translated(closed, "chunk", zeros=zeros), outputs
 
 
 def _stable(key: Any) -> str | None:
