@@ -1160,10 +1160,11 @@ def translate(closed: Any, name: str, arg_names: Sequence[str] | None = None,
     input k that are zero in every call (the program is then valid only for such inputs)."""
     jaxpr = closed.jaxpr
     em = Emitter(tag=name, calls=_calls(jaxpr, {}))
-    masks = [None if z is None or not np.any(z) else np.asarray(z, bool) for z in zeros]
+    masks: list[np.ndarray | None] = [None if z is None or not np.any(z) else np.asarray(z, bool) for z in zeros]
     masks += [None] * (len(jaxpr.invars) - len(masks))
     args = [Ref(arg_names[k] if arg_names else f"in{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name,
-                zeros=None if masks[k] is None else masks[k].reshape(v.aval.shape)) for k, v in enumerate(jaxpr.invars)]
+                zeros=None if mask is None else mask.reshape(v.aval.shape))
+            for k, (v, mask) in enumerate(zip(jaxpr.invars, masks, strict=True))]
     translator = Translator(em)
     # a view may read an input that an output overwrites: views are stored before any output is written
     results = [translator.materialize(r) for r in translator.run(jaxpr, closed.consts, args)]
