@@ -156,17 +156,7 @@ def test_a_branched_tree_with_unaligned_and_prismatic_joints():
     """The tree path (subtree sums by the 0/1 ancestry matrix): joints 2 and 4 both hang from joint 1. Joints are added
     depth first: Pinocchio's `crba` and `computeCoriolisMatrix` take each subtree's velocities to be contiguous."""
     rng = np.random.default_rng(3)
-    model = pin.Model()
-    axis = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
-    joints = [(0, pin.JointModelRY()), (1, pin.JointModelRevoluteUnaligned(axis)), (2, pin.JointModelPX()),
-              (1, pin.JointModelPrismaticUnaligned(np.array([0.0, 0.6, 0.8]))), (4, pin.JointModelRUBZ())]
-    for k, (parent, joint) in enumerate(joints):
-        R, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-        j = model.addJoint(parent, joint, pin.SE3(R * np.sign(np.linalg.det(R)), rng.normal(scale=0.3, size=3)),
-                           f"j{k}")
-        model.appendBodyToJoint(j, pin.Inertia.Random(), pin.SE3.Identity())
-    model.gravity = pin.Motion(np.array([0.3, -1.0, -9.7]), np.zeros(3))
-    tree = KinematicTree.from_pinocchio(model, rotor_inertia=True, viscous=True)
+    tree, model = branched_tree(rng)
     assert tree.parents == (-1, 0, 1, 0, 3) and tree.joints == "RRPPR" and not tree._chain
     check_against_pinocchio(tree, model, rng)
     check_against_pinocchio(tree, model, rng, physical=True)
@@ -273,6 +263,39 @@ def test_physical_identities(name):
         close(tree.regressor(q, dq, v, a) @ phi, M @ a + V @ v + G + F)
         tau = tree.inverse_dynamics(q, dq, a, phi)
         close(tree.forward_dynamics(q, dq, tau, phi), a, 1e-9)
+
+
+def branched_tree(rng: np.random.Generator) -> tuple[KinematicTree, object]:
+    """Joints 2 and 4 both hang from joint 1 (unaligned and prismatic joints, rotor and viscous columns)."""
+    model = pin.Model()
+    axis = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
+    joints = [(0, pin.JointModelRY()), (1, pin.JointModelRevoluteUnaligned(axis)), (2, pin.JointModelPX()),
+              (1, pin.JointModelPrismaticUnaligned(np.array([0.0, 0.6, 0.8]))), (4, pin.JointModelRUBZ())]
+    for k, (parent, joint) in enumerate(joints):
+        R, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        j = model.addJoint(parent, joint, pin.SE3(R * np.sign(np.linalg.det(R)), rng.normal(scale=0.3, size=3)),
+                           f"j{k}")
+        model.appendBodyToJoint(j, pin.Inertia.Random(), pin.SE3.Identity())
+    model.gravity = pin.Motion(np.array([0.3, -1.0, -9.7]), np.zeros(3))
+    return KinematicTree.from_pinocchio(model, rotor_inertia=True, viscous=True), model
+
+
+@pytest.mark.parametrize("name", ["panda", "puma560", "branched"])
+def test_regressor_products_equal_the_regressor(name):
+    """(Y φ, Yᵀ r) without forming Y (one pass contracted with φ; link blocks A_iᵀ W_i) equal Y φ and Yᵀ r of the
+    regressor, every column group included (the Panda's Coulomb columns, the tree's rotor and viscous ones), on a batch
+    and on one state."""
+    rng = np.random.default_rng(5)
+    tree = {"panda": lambda: example("panda")[0], "puma560": puma, "branched": lambda: branched_tree(rng)[0]}[name]()
+    q, dq, v, a, r = rng.normal(size=(5, 4, tree.n))
+    phi = rng.normal(size=tree.p)
+    Y = tree.regressor(q, dq, v, a)
+    Yphi, Ytr = tree.regressor_products(q, dq, v, a, phi, r)
+    close(Yphi, Y @ phi)
+    close(Ytr, np.einsum("bij,bi->bj", Y, r))
+    one = tree.regressor_products(q[0], dq[0], v[0], a[0], phi, r[0])
+    close(one[0], Yphi[0])
+    close(one[1], Ytr[0])
 
 
 def test_batch_axes_broadcast_and_match_single_states():

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from robotadapt.native import c99
-from robotadapt.native.build import compiled, compiler
+from robotadapt.native.build import Compiled, compiled, compiler
 from robotadapt.native.c99 import PRIMITIVES, Unsupported, translate
 
 pytestmark = pytest.mark.skipif(compiler() is None, reason="no C compiler (set CC or install gcc)")
@@ -177,3 +177,40 @@ def test_functions_inside_functions_have_their_own_names(monkeypatch):
     with jax.enable_x64(True):
         expected = fn(jnp.asarray(z))
     np.testing.assert_allclose(compiled(fn, z)(z)[0], np.asarray(expected), rtol=1e-12, atol=1e-12)
+
+
+def test_small_values_are_held_as_elements_and_their_zeros_fold():
+    """A small float64 value is held element by element: a product with a 0/1 mask and a dense matrix times a vector
+    whose structural zeros the translator is told of write no multiply by a zero, and the program still equals JAX
+    (on inputs with those zeros); a large value stays a loop nest."""
+    mask = np.tril(np.ones((4, 4)))
+    gain = np.diag([1.0, 2.0, 3.0, 4.0])
+
+    def fn(x, y, g):
+        return (x[:, None] * y[None, :] * mask).sum(axis=1), g @ x, jnp.sin(jnp.outer(jnp.concatenate([x] * 300), y)).sum()
+
+    x, y = RNG.normal(size=(2, 4))
+    with jax.enable_x64(True):
+        closed = jax.make_jaxpr(fn)(x, y, gain)
+        expected = fn(jnp.asarray(x), jnp.asarray(y), jnp.asarray(gain))
+    zeros = [None, None, gain == 0]
+    text = translate(closed, "f", zeros=zeros)
+    body = text[text.index("static void f("):]
+    assert set(re.findall(r"\bin2\[(\d+)\]", body)) == {"0", "5", "10", "15"}  # only Γ's diagonal is read
+    products = {(int(i), int(j)) for i, j in re.findall(r"in0\[(\d)\]\)? \* \(?in1\[(\d)\]", body)}
+    assert products == {(i, j) for i in range(4) for j in range(i + 1)}  # the mask's upper triangle is gone
+    assert "for (int" in body  # the 1200×4 sines: a loop
+    got = Compiled.translated(closed, "held", zeros=zeros)(x, y, gain)
+    for g, e in zip(got, expected, strict=True):
+        np.testing.assert_allclose(g, np.asarray(e), rtol=1e-12, atol=1e-14)
+
+
+def test_unread_elements_are_not_declared():
+    """An element whose only reader folded away (a factor of a product with zero) is not declared: C compilers warn of
+    unused variables (the export is built with -Wall -Werror)."""
+    def fn(x):
+        return jnp.sin(x) * jnp.array([0.0, 1.0, 0.0])
+
+    with jax.enable_x64(True):
+        text = translate(jax.make_jaxpr(fn)(V[:3]), "f")
+    assert text.count("sin(") == 1

@@ -69,6 +69,15 @@ class HasRegressor(Protocol):
 
 
 @runtime_checkable
+class HasRegressorProducts(Protocol):
+    def regressor_products(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference,
+                           phi: Array) -> tuple[Array, Array, Array]:
+        """(Z φ, Zᵀ r, r) for the law's (Z, r) of `regressor`, without forming Z where the model can
+        (:meth:`~robotadapt.robots.base.RobotModel.regressor_products`): the torque's Z φ̂, the update's Zᵀ r and the
+        passivity integrand −(Zᵀ r)ᵀ φ̃ from one pass."""
+
+
+@runtime_checkable
 class NeedsAcceleration(ControlLaw, Protocol):
     """A controller whose update law needs the measured joint acceleration (Table 6.2.1). Its torque must not."""
 
@@ -156,11 +165,24 @@ def errors(q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
     return ref.q_des - q, ref.dq_des - dq
 
 
-def slotine_li_regressor(model: RobotModel, Lam: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
-    """(Y, r): r = ė + Λe (6.3.8) and Y(q, q̇, q̇_d + Λe, q̈_d + Λė) (6.3.11), shared by every law with Table 6.3.1's torque."""
+def slotine_li_reference(Lam: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array, Array]:
+    """(v, a, r): the reference velocity q̇_d + Λe and acceleration q̈_d + Λė (6.3.11), and r = ė + Λe (6.3.8)."""
     e, de = errors(q, dq, ref)
     Le, Lde = matvec(Lam, e), matvec(Lam, de)
-    return model.regressor(q, dq, ref.dq_des + Le, ref.ddq_des + Lde), de + Le
+    return ref.dq_des + Le, ref.ddq_des + Lde, de + Le
+
+
+def slotine_li_regressor(model: RobotModel, Lam: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+    """(Y, r): Y(q, q̇, q̇_d + Λe, q̈_d + Λė) (6.3.11) and r (6.3.8), shared by every law with Table 6.3.1's torque."""
+    v, a, r = slotine_li_reference(Lam, q, dq, ref)
+    return model.regressor(q, dq, v, a), r
+
+
+def slotine_li_products(model: RobotModel, Lam: Array, q: Array, dq: Array, ref: Reference,
+                        phi: Array) -> tuple[Array, Array, Array]:
+    """(Y φ, Yᵀ r, r) for slotine_li_regressor's (Y, r), through the model's `regressor_products` (no Y formed)."""
+    v, a, r = slotine_li_reference(Lam, q, dq, ref)
+    return (*model.regressor_products(q, dq, v, a, phi, r), r)
 
 
 def freeze(obj: Any, **values: Any) -> None:

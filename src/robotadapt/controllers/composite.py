@@ -12,7 +12,7 @@ from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar
-from .base import Array, errors, estimate, freeze, gains, slotine_li_regressor
+from .base import Array, errors, estimate, freeze, gains, slotine_li_products, slotine_li_regressor
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +100,11 @@ class Composite:
         """(Y, r) with the Slotine–Li reference velocity q̇_d + Λe and acceleration q̈_d + Λė (6.3.11)."""
         return slotine_li_regressor(self.model, self.Lam, q, dq, ref)
 
+    def regressor_products(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference,
+                           phi: Array) -> tuple[Array, Array, Array]:
+        """(Y φ, Yᵀ r, r) for :meth:`regressor`'s (Y, r)."""
+        return slotine_li_products(self.model, self.Lam, q, dq, ref, phi)
+
     def filtered_regressor(self, x: Array, q: Array, dq: Array) -> Array:
         """W_f = a Y_h(q, q̇) − Z3, shape `(..., n, p)`, with W_f φ = f * τ (6.6.11)."""
         return self.a * self.model.momentum_regressor(q, dq) - self._split(x)[3]
@@ -114,11 +119,11 @@ class Composite:
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         xp = array_namespace(x, q, dq)
         phi_hat, P, tau_f, _ = self._split(x)
-        Y, r = self.regressor(t, x, q, dq, ref)
-        tau = matvec(Y, phi_hat) + r @ self.Kv.T
+        Yphi, Ytr, r = self.regressor_products(t, x, q, dq, ref, phi_hat)
+        tau = Yphi + r @ self.Kv.T
         Wf = self.filtered_regressor(x, q, dq)
         tau_err = tau_f - matvec(Wf, phi_hat)  # (6.6.15)
-        dphi = matvec(P, matvec(Y.mT, r) + matvec(Wf.mT, tau_err))  # (6.6.28)
+        dphi = matvec(P, Ytr + matvec(Wf.mT, tau_err))  # (6.6.28)
         WP = Wf @ P
         dP = self.forgetting_factor(P)[..., None, None] * P - WP.mT @ WP  # (6.6.17) with forgetting
         dP = 0.5 * (dP + dP.mT)

@@ -8,7 +8,7 @@ from typing import Any
 from ..arrays import matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from .base import Array, EstimateState, errors, gains, slotine_li_regressor
+from .base import Array, EstimateState, errors, gains, slotine_li_products, slotine_li_regressor
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,10 +45,14 @@ class InertiaRelated(EstimateState):
         """(Y, r) with the Slotine–Li reference velocity q̇_d + Λe and acceleration q̈_d + Λė (6.3.11)."""
         return slotine_li_regressor(self.model, self.Lam, q, dq, ref)
 
+    def regressor_products(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference,
+                           phi: Array) -> tuple[Array, Array, Array]:
+        """(Y φ, Yᵀ r, r) for :meth:`regressor`'s (Y, r)."""
+        return slotine_li_products(self.model, self.Lam, q, dq, ref, phi)
+
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
-        Y, r = self.regressor(t, x, q, dq, ref)
-        tau = matvec(Y, self.phi_hat(x)) + matvec(self.Kv, r)
-        return tau, self.geometry.rate(x, matvec(Y.mT, r))
+        Yphi, Ytr, r = self.regressor_products(t, x, q, dq, ref, self.phi_hat(x))
+        return Yphi + matvec(self.Kv, r), self.geometry.rate(x, Ytr)
 
     def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
         """V of (6.3.7) with the true φ (its parameter term the geometry's)."""

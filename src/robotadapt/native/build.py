@@ -27,7 +27,7 @@ from .c99 import c_type, translate
 
 # -O2 without the passes that grow superlinearly on one long function (partial redundancy elimination, value range
 # propagation, global CSE): the Panda's RK4 chunk (28 000 lines) builds in 32 s instead of 94 s
-CFLAGS = ("-O2", "-fno-tree-pre", "-fno-tree-vrp", "-fno-gcse", "-std=c99", "-fPIC", "-shared")
+CFLAGS = ("-O2", "-fno-tree-pre", "-fno-tree-vrp", "-fno-gcse", "-fno-thread-jumps", "-std=c99", "-fPIC", "-shared")
 PRELUDE = "#include <math.h>\n#include <stdint.h>\n#include <stddef.h>\n#include <string.h>\n\n"
 INSTALL = "install one (Debian/Ubuntu: apt-get install gcc; macOS: xcode-select --install) or point CC at it"
 

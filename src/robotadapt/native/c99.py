@@ -380,13 +380,15 @@ class Translator:
         got = got if eqn.primitive.multiple_results else [got]
         return [np.asarray(v, dtype=dtype).reshape(shape) for v, (shape, dtype) in zip(got, outs, strict=True)]
 
-    @staticmethod
-    def _held(name: str, ins: list[Ref], outs: list, params: dict[str, Any]) -> bool:
+    def _held(self, name: str, ins: list[Ref], outs: list, params: dict[str, Any]) -> bool:
         """Whether the equation's results are held as elements: a primitive :meth:`held` has, float64 results of at most
-        `elements.LIMIT` elements, computed from at most `elements.WORK` terms."""
-        # a move of a value whose elements are known in part (held, constant, with zeros) keeps them up to WORK
-        limit = elements.WORK if name in MOVES and (ins[0].elems is not None or ins[0].value is not None or
-                                                    ins[0].zeros is not None) else elements.LIMIT
+        `elements.LIMIT` elements, computed from at most `elements.WORK` terms, in a C function that has declared fewer
+        than `elements.BUDGET` variables."""
+        if self.em.scalars.declared >= elements.BUDGET:
+            return False
+        # a move of a constant or of an argument with structural zeros (a gain transposed) keeps them up to WORK
+        limit = elements.WORK if name in MOVES and (ins[0].value is not None or ins[0].zeros is not None) \
+            else elements.LIMIT
         if name not in HELD or any(dtype != "float64" or int(np.prod(shape)) > limit for shape, dtype in outs):
             return False
         if name == "dot_general":

@@ -30,6 +30,8 @@ import numpy as np
 
 LIMIT = 4096  # a float64 result with at most this many elements is held as elements
 WORK = 16384  # … if computing it takes at most this many terms (a reduction's or a contraction's inputs)
+BUDGET = 10_000  # … while its C function has declared fewer variables than this (gcc's register allocation grows
+# faster than the function: the Panda's composite rate, 16 400 of them, built in 17 s where its loops took 6 s)
 
 Elem = Any  # a known number (float; int or bool for other dtypes' constants) or the C text of a double
 
@@ -82,6 +84,7 @@ class Scalars:
     def __init__(self, emit: Callable[[str], None], fresh: Callable[[str], str]) -> None:
         self.emit, self.fresh = emit, fresh
         self.scopes: list[dict[Any, Any]] = [{}]
+        self.declared = 0
 
     def open(self) -> None:
         """A C block begins: what is declared in it is not seen after it."""
@@ -106,6 +109,7 @@ class Scalars:
             name = self.fresh("e")
             self.emit(f"const double {name} = {expr};")
             self.keep(key, name)
+            self.declared += 1
         return str(name)
 
     def neg(self, a: Elem) -> Elem:

@@ -62,6 +62,12 @@ class RobotModel(ABC):
     def regressor(self, q: Array, dq: Array, v: Array, a: Array) -> Array:
         """Y(q, q̇, v, a) of shape `(..., n, p)` with `Y φ = M(q) a + V_m(q, q̇) v + G(q) + F(q̇)` (P3)."""
 
+    def regressor_products(self, q: Array, dq: Array, v: Array, a: Array, phi: Array, r: Array) -> tuple[Array, Array]:
+        """(Y φ, Yᵀ r) for Y = Y(q, q̇, v, a) (P3): what an adaptive law with Table 6.3.1's torque needs of Y, (6.3.11)
+        and (6.3.16). Generic form: through Y; an n-DOF model computes both without forming Y."""
+        Y = self.regressor(q, dq, v, a)
+        return matvec(Y, phi), matvec(Y.mT, r)
+
     def remainder_regressor(self, q: Array, dq: Array) -> Array:
         """Y_g(q, q̇) with `Y_g φ = −Ṁ q̇ + V_m q̇ + G + F = −V_mᵀ q̇ + G + F` (6.6.4), for torque filtering.
 

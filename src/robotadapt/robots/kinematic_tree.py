@@ -566,6 +566,27 @@ class KinematicTree(SerialChain, RobotModel):
         Y = self._project(xp, kin, self._link_regressor(xp, self._pass(xp, kin, dq, v, a, True)))
         return self._with_extras(xp, Y, batch, {"rotor_inertia": a, "viscous": dq, "coulomb": dq})
 
+    def regressor_products(self, q: Array, dq: Array, v: Array, a: Array, phi: Array, r: Array) -> tuple[Array, Array]:
+        """(Y φ, Yᵀ r) for Y = Y(q, q̇, v, a) without forming Y, from one bilinear pass: Y φ = Σ S̃_jᵀ X_i* (A_i φ_i) is
+        the pass contracted with φ (as τ is), and link i's block of Yᵀ r is A_iᵀ W_i, W_i = [ω; v_o] the velocity
+        of link i (in its axes, at its origin) that the joint rates r give, since Σ_j r_j S̃_jᵀ X_i* w = W_iᵀ w over
+        the joints j that move link i. About half the arithmetic of Y itself on the Panda (7×70 entries, 28 blocks)."""
+        xp, batch, (q, dq, v, a, phi, r) = self._inputs(q, dq, v, a, phi, r)
+        kin = self._kinematics(xp, q)
+        m = self._pass(xp, kin, dq, v, a, True)
+        Yphi = self._wrench_torques(xp, kin, m, phi) + self.friction(dq, phi)
+        if self.rotor_inertia is not None:
+            Yphi = Yphi + self._extra(phi, "rotor_inertia") * a
+        W = self._ancestors(xp, r[..., None] * xp.concat([kin.u, kin.x], axis=-1))  # Σ r_j S̃_j, world, at the origin
+        w, lin = W[..., 0:3], W[..., 3:6]
+        local = _mtv(kin.R0[..., None, :, :], xp.stack([w, lin + _cross(xp, w, kin.p0)], axis=-2))  # (..., n, 2, 3)
+        Ytr = (self._link_regressor(xp, m) * xp.reshape(local, local.shape[:-2] + (6, 1))).sum(axis=-2)  # (..., n, 10)
+        Ytr = xp.reshape(Ytr, Ytr.shape[:-2] + (10 * self.n,))
+        extras = {"rotor_inertia": a, "viscous": dq, "coulomb": xp.sign(dq)}
+        Ytr = xp.concat([xp.broadcast_to(Ytr, batch + Ytr.shape[-1:])]
+                        + [xp.broadcast_to(extras[e] * r, batch + (self.n,)) for e in self.extras], axis=-1)
+        return xp.broadcast_to(Yphi, batch + (self.n,)), Ytr
+
     def momentum_regressor(self, q: Array, dq: Array) -> Array:
         """Y_h(q, q̇) with Y_h φ = M(q) q̇ (6.6.3): the pass with zero velocity, acceleration q̇ and no gravity."""
         xp, batch, (q, dq) = self._inputs(q, dq)

@@ -19,7 +19,15 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 
 from ..arrays import array_namespace, matvec
-from ..controllers.base import FiltersTorque, HasGuard, HasInstantEstimate, HasProjection, HasRegressor, NeedsAcceleration
+from ..controllers.base import (
+    FiltersTorque,
+    HasGuard,
+    HasInstantEstimate,
+    HasProjection,
+    HasRegressor,
+    HasRegressorProducts,
+    NeedsAcceleration,
+)
 from ..plant.plant import Plant, same_model
 from ..trajectories import Reference, Trajectory
 from .driver import GUARD, Verdict
@@ -85,11 +93,16 @@ class ClosedLoop:
         return (z[..., -2], z[..., -1]) if self.w else None
 
     def dissipation(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
-        """The passivity integrand −rᵀ Z (φ(t) − φ̂) at (q, q̇) as the law sees them, φ̂ as its torque uses it."""
+        """The passivity integrand −rᵀ Z (φ(t) − φ̂) = −(Zᵀ r)ᵀ (φ(t) − φ̂) at (q, q̇) as the law sees them, φ̂ as its
+        torque uses it (Zᵀ r from the law's regressor products where it has them: the same pass as its torque's)."""
         ctrl = self.controller
-        Z, r = ctrl.regressor(t, x, q, dq, ref)
         phi_hat = ctrl.phi_hat_at(t, x, q, dq, ref) if isinstance(ctrl, HasInstantEstimate) else ctrl.phi_hat(x)
-        return -(r * matvec(Z, self.plant.phi_at(t) - phi_hat)).sum(axis=-1)
+        if isinstance(ctrl, HasRegressorProducts):
+            _, Ztr, _ = ctrl.regressor_products(t, x, q, dq, ref, phi_hat)
+        else:
+            Z, r = ctrl.regressor(t, x, q, dq, ref)
+            Ztr = matvec(Z.mT, r)
+        return -(Ztr * (self.plant.phi_at(t) - phi_hat)).sum(axis=-1)
 
     def torque(self, t: Array, z: Array, ref: Reference) -> Array:
         """The controller's commanded torque (before the actuator's saturation)."""
