@@ -24,7 +24,10 @@ v = q̇ it is the standard pass (checked against Pinocchio's `computeJointTorque
     A_i φ_i, link i's wrench (6 × 10, in its own axes, where φ_i is linear), and
     Y[j, 10 i + c] = S̃_jᵀ (X_i* A_i)[:, c] over the joints j that move link i.
 
-M is the composite-rigid-body algorithm (Featherstone 2008, §6.2) on φ in world axes, V_m column by column (the pass
+An adaptive law needs Y only through Y φ̂ and Yᵀ r (Table 6.3.1): `regressor_products` gives both from the same pass
+without the projections — the pass contracted with φ̂ as τ is, and link i's block A_iᵀ W_i with W_i the velocity the
+joint rates r give link i — about half of Y's arithmetic on the Panda (tests/test_kinematic_tree.py checks it against
+Y). M is the composite-rigid-body algorithm (Featherstone 2008, §6.2) on φ in world axes, V_m column by column (the pass
 with v = e_k, all k at once on an extra axis), G from the subtrees' mass and first moment, τ and the bias from the pass
 contracted with φ. The arrays are laid out per link (`(..., n, 3)`), not per scalar. Measured on the Panda, the same
 algorithm unrolled into scalar code (one array per component, zeros of the geometry dropped, like generated code) gave
