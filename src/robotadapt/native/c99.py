@@ -21,7 +21,7 @@ import itertools
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -166,15 +166,20 @@ class Emitter:
     functions: list[str] = field(default_factory=list)  # file-scope C functions of nested programs called repeatedly
     defined: dict[Any, tuple[str, list[int]]] = field(default_factory=dict)  # their names and kept outputs, by call
     calls: dict[int, int] = field(default_factory=dict)  # how often each nested program is called (:func:`_calls`)
+    hold: bool = True  # whether small values are held as elements (:func:`_body`)
     scalars: Scalars = field(init=False)  # the arithmetic of values held as elements
 
     def __post_init__(self) -> None:
         self.scalars = Scalars(self.emit, self.fresh)
 
-    def nested(self) -> Emitter:
+    def nested(self, hold: bool = True) -> Emitter:
         """An emitter for a function of its own, sharing this one's names, constants and functions."""
         return Emitter(consts=self.consts, counter=self.counter, tag=self.tag, functions=self.functions,
-                       defined=self.defined, calls=self.calls)
+                       defined=self.defined, calls=self.calls, hold=hold)
+
+    @property
+    def loops(self) -> int:
+        return sum(line.lstrip().startswith("for (") for line in self.lines)
 
     def fresh(self, prefix: str = "v") -> str:
         return f"{prefix}{next(self.counter)}"
@@ -384,7 +389,7 @@ class Translator:
         """Whether the equation's results are held as elements: a primitive :meth:`held` has, float64 results of at most
         `elements.LIMIT` elements, computed from at most `elements.WORK` terms, in a C function that has declared fewer
         than `elements.BUDGET` variables."""
-        if self.em.scalars.declared >= elements.BUDGET:
+        if not self.em.hold or self.em.scalars.declared >= elements.BUDGET:
             return False
         # a move of a constant or of an argument with structural zeros (a gain transposed) keeps them up to WORK
         limit = elements.WORK if name in MOVES and (ins[0].value is not None or ins[0].zeros is not None) \
@@ -906,13 +911,18 @@ class Translator:
         """`static void NAME(const T *a0, …, T *r0, …)` computing `closed` on arguments shaped like `ins`, written to the
         emitter's functions: (NAME, the outputs it writes: those read)."""
         name = self.em.fresh(f"{self.em.tag}_f")  # unique: a function defined inside this one is named first
-        sub = self.em.nested()
         args = [r if _inside(r) else Ref(f"a{k}", r.shape, r.dtype, zeros=r.zeros) for k, r in enumerate(ins)]
-        values = Translator(sub).run(closed.jaxpr, closed.consts, args, self.used)
-        kept = [k for k, v in enumerate(values) if v is not UNUSED]
-        returns = [Ref(f"r{k}", *outs[k]) for k in kept]
-        for target, k in zip(returns, kept, strict=True):
-            Translator(sub)._copy_into(target, values[k], "0", max(target.size, 1))
+        used = self.used
+
+        def fill(sub: Emitter) -> tuple[list[int], list[Ref]]:
+            values = Translator(sub).run(closed.jaxpr, closed.consts, args, used)
+            kept = [k for k, v in enumerate(values) if v is not UNUSED]
+            returns = [Ref(f"r{k}", *outs[k]) for k in kept]
+            for target, k in zip(returns, kept, strict=True):
+                Translator(sub)._copy_into(target, values[k], "0", max(target.size, 1))
+            return kept, returns
+
+        sub, (kept, returns) = _body(self.em.nested, fill)
         params = [f"const {a.ctype} *{a.name}" for a in args if not _inside(a)] + [f"{r.ctype} *{r.name}"
                                                                                     for r in returns]
         self.em.functions.append("\n".join([f"static void {name}({', '.join(params)}) {{", *elements.prune(sub.lines),
@@ -1161,27 +1171,45 @@ def translate(closed: Any, name: str, arg_names: Sequence[str] | None = None,
     docstring); its constants become static arrays before the function. `zeros[k]`, where given, marks the elements of
     input k that are zero in every call (the program is then valid only for such inputs)."""
     jaxpr = closed.jaxpr
-    em = Emitter(tag=name, calls=_calls(jaxpr, {}))
+    first = Emitter(tag=name, calls=_calls(jaxpr, {}))
     masks: list[np.ndarray | None] = [None if z is None or not np.any(z) else np.asarray(z, bool) for z in zeros]
     masks += [None] * (len(jaxpr.invars) - len(masks))
     args = [Ref(arg_names[k] if arg_names else f"in{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name,
                 zeros=None if mask is None else mask.reshape(v.aval.shape))
             for k, (v, mask) in enumerate(zip(jaxpr.invars, masks, strict=True))]
-    translator = Translator(em)
-    # a view may read an input that an output overwrites: views are stored before any output is written
-    results = [translator.materialize(r) for r in translator.run(jaxpr, closed.consts, args)]
     outs = [Ref(out_names[k] if out_names else f"out{k}", tuple(v.aval.shape), np.dtype(v.aval.dtype).name)
             for k, v in enumerate(jaxpr.outvars)]
-    for out, value in zip(outs, results, strict=True):  # last: an output may alias an input
-        def copy(ix: list[str], out: Ref = out, value: Ref = value) -> list[str]:
-            return [f"{out.name}[{ix[0]}] = ({out.ctype}){value.at(ix[0])};"]
 
-        em.loop([max(out.size, 1)], copy)
+    def fill(em: Emitter) -> None:
+        translator = Translator(em)
+        # a view may read an input that an output overwrites: views are stored before any output is written
+        results = [translator.materialize(r) for r in translator.run(jaxpr, closed.consts, args)]
+        for out, value in zip(outs, results, strict=True):  # last: an output may alias an input
+            def copy(ix: list[str], out: Ref = out, value: Ref = value) -> list[str]:
+                return [f"{out.name}[{ix[0]}] = ({out.ctype}){value.at(ix[0])};"]
+
+            em.loop([max(out.size, 1)], copy)
+
+    em, _ = _body(lambda hold=True: first if hold else first.nested(hold=False), fill)
     params = [f"const {a.ctype} *{a.name}" for a in args] + [f"{o.ctype} *{o.name}" for o in outs]
     body = "\n".join([*em.functions, f"static void {name}({', '.join(params)}) {{", *elements.prune(em.lines), "}",
                       ""])
     used = set(re.findall(rf"\b{re.escape(name)}_c\d+\b", body))  # a constant read only as elements is not declared
     return "\n".join([*(c for c in em.consts if c.split()[3].split("[")[0] in used), body])
+
+
+T = TypeVar("T")
+
+
+def _body(make: Callable[..., Emitter], fill: Callable[[Emitter], T]) -> tuple[Emitter, T]:
+    """A C function's body: `fill` on `make()`, an emitter that holds small values as elements, and again on
+    `make(hold=False)` where that gave a function gcc builds slowly (:func:`robotadapt.native.elements.crowded`)."""
+    em = make()
+    out = fill(em)
+    if elements.crowded(em.scalars.declared, em.loops):
+        em = make(hold=False)
+        out = fill(em)
+    return em, out
 
 
 def _inside(ref: Ref) -> bool:

@@ -30,10 +30,18 @@ import numpy as np
 
 LIMIT = 4096  # a float64 result with at most this many elements is held as elements
 WORK = 16384  # … if computing it takes at most this many terms (a reduction's or a contraction's inputs)
-BUDGET = 10_000  # … while its C function has declared fewer variables than this (gcc's register allocation grows
-# faster than the function: the Panda's composite rate, 16 400 of them, built in 17 s where its loops took 6 s)
+BUDGET = 10_000  # … in a C function of fewer variables than this (gcc's time grows faster than the function)
+CROWD = 1_000_000  # variables × loop nests above which gcc's loop passes dominate its time (each updates the SSA form)
 
 Elem = Any  # a known number (float; int or bool for other dtypes' constants) or the C text of a double
+
+
+def crowded(declared: int, loops: int) -> bool:
+    """Whether a C function that holds `declared` variables and has `loops` loop nests is one gcc builds slowly, so
+    that it is translated with loops only: its variables times its loops (loop statements) exceed CROWD. Measured:
+    the Panda's Slotine–Li rate (7 000 × 8) builds in 3 s; a batch of 16 Panda runs (10 000, the BUDGET, × 3 000) did
+    not build in 10 minutes, and as loops builds in 8 s; the Panda's composite rate (10 000 × 1 400) is loops too."""
+    return declared * loops > CROWD
 
 
 def known(e: Elem) -> bool:
