@@ -214,3 +214,18 @@ def test_unread_elements_are_not_declared():
     with jax.enable_x64(True):
         text = translate(jax.make_jaxpr(fn)(V[:3]), "f")
     assert text.count("sin(") == 1
+
+
+def test_constants_are_computed_at_translation_empty_ones_included():
+    """An equation on constants only (an identity built from iota, a product of empty arrays: the passivity law's
+    zero-width filter) is computed when translated: the identity folds away, and the program equals JAX."""
+    def fn(x):
+        empty = jnp.zeros((0, 2)) * x[0]
+        return jnp.eye(2) @ x + jnp.zeros(0) @ empty
+
+    x = RNG.normal(size=2)
+    with jax.enable_x64(True):
+        text = translate(jax.make_jaxpr(fn)(x), "f")
+        expected = fn(jnp.asarray(x))
+    assert " * " not in text  # eye(2) @ x is x
+    np.testing.assert_allclose(compiled(fn, x)(x)[0], np.asarray(expected), rtol=1e-12, atol=1e-14)

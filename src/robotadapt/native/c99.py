@@ -89,10 +89,9 @@ class Ref:
         """The elements (:mod:`.elements`): held ones, a constant's values, else the C text of each."""
         if self.elems is not None:
             return self.elems
-        out = np.empty(self.shape, dtype=object)
         if self.value is not None:
-            out[...] = np.asarray(self.value).tolist() if self.shape else np.asarray(self.value).item()
-            return out
+            return np.broadcast_to(np.asarray(self.value).astype(object), self.shape).copy()
+        out = np.empty(self.shape, dtype=object)
         plain = self.view is None and not self.scalar_expr
         for flat, ix in enumerate(np.ndindex(*self.shape)):
             out[ix] = f"{self.name}[{flat}]" if plain else self.get([str(i) for i in ix])
@@ -378,7 +377,7 @@ class Translator:
             return None
         import jax
 
-        values = [r.value if r.value is not None else np.array(r.elements().tolist(), dtype=r.dtype) for r in ins]
+        values = [r.value if r.value is not None else r.elements().astype(r.dtype) for r in ins]
         with jax.enable_x64(True):
             got = eqn.primitive.bind(*[np.asarray(v, dtype=r.dtype) for v, r in zip(values, ins, strict=True)],
                                      **eqn.params)

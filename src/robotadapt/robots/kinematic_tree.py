@@ -26,8 +26,8 @@ v = q̇ it is the standard pass (checked against Pinocchio's `computeJointTorque
 
 An adaptive law needs Y only through Y φ̂ and Yᵀ r (Table 6.3.1): `regressor_products` gives both from the same pass
 without the projections — the pass contracted with φ̂ as τ is, and link i's block A_iᵀ W_i with W_i the velocity the
-joint rates r give link i — about half of Y's arithmetic on the Panda (tests/test_kinematic_tree.py checks it against
-Y). M is the composite-rigid-body algorithm (Featherstone 2008, §6.2) on φ in world axes, V_m column by column (the pass
+joint rates r give link i — two thirds of the arithmetic through Y on the Panda (tests/test_kinematic_tree.py checks
+it against Y). M is the composite-rigid-body algorithm (Featherstone 2008, §6.2) on φ in world axes, V_m column by column (the pass
 with v = e_k, all k at once on an extra axis), G from the subtrees' mass and first moment, τ and the bias from the pass
 contracted with φ. The arrays are laid out per link (`(..., n, 3)`), not per scalar. Measured on the Panda, the same
 algorithm unrolled into scalar code (one array per component, zeros of the geometry dropped, like generated code) gave
@@ -573,7 +573,8 @@ class KinematicTree(SerialChain, RobotModel):
         """(Y φ, Yᵀ r) for Y = Y(q, q̇, v, a) without forming Y, from one bilinear pass: Y φ = Σ S̃_jᵀ X_i* (A_i φ_i) is
         the pass contracted with φ (as τ is), and link i's block of Yᵀ r is A_iᵀ W_i, W_i = [ω; v_o] the velocity
         of link i (in its axes, at its origin) that the joint rates r give, since Σ_j r_j S̃_jᵀ X_i* w = W_iᵀ w over
-        the joints j that move link i. About half the arithmetic of Y itself on the Panda (7×70 entries, 28 blocks)."""
+        the joints j that move link i. On the Panda, translated to C: 4 200 operations against 6 100 for Y φ and Yᵀ r
+        through Y."""
         xp, batch, (q, dq, v, a, phi, r) = self._inputs(q, dq, v, a, phi, r)
         kin = self._kinematics(xp, q)
         m = self._pass(xp, kin, dq, v, a, True)
