@@ -26,15 +26,15 @@ v = q̇ it is the standard pass (checked against Pinocchio's `computeJointTorque
 
 An adaptive law needs Y only through Y φ̂ and Yᵀ r (Table 6.3.1): `regressor_products` gives both from the same pass
 without the projections — the pass contracted with φ̂ as τ is, and link i's block A_iᵀ W_i with W_i the velocity the
-joint rates r give link i — two thirds of the arithmetic through Y on the Panda (tests/test_kinematic_tree.py checks
-it against Y). M is the composite-rigid-body algorithm (Featherstone 2008, §6.2) on φ in world axes, V_m column by column (the pass
-with v = e_k, all k at once on an extra axis), G from the subtrees' mass and first moment, τ and the bias from the pass
-contracted with φ. The arrays are laid out per link (`(..., n, 3)`), not per scalar. Measured on the Panda, the same
-algorithm unrolled into scalar code (one array per component, zeros of the geometry dropped, like generated code) gave
-an XLA program with 26,000 multiplies for Y alone (fusion copies the kinematics into each of Y's 490 outputs), and a
-Slotine–Li RK4 step that compiled in 51 s and ran in 825 µs; this layout: 8 s and 100 µs, on the same loaded machine
-(benchmarks/bench_kinematic_tree.py). M by composite rigid bodies measured 2–3 times faster than from the regressor's
-acceleration slot (n passes with a = e_k).
+joint rates r give link i — two thirds of the arithmetic through Y on the Panda (tests/test_kinematic_tree.py checks it
+against Y). M is the composite-rigid-body algorithm (Featherstone 2008, §6.2) on φ in world axes, V_m column by column
+(the pass with v = e_k, all k at once on an extra axis), G from the subtrees' mass and first moment, τ and the bias
+from the pass contracted with φ. The arrays are laid out per link (`(..., n, 3)`), not per scalar. Measured on the
+Panda, the same algorithm unrolled into scalar code (one array per component, zeros of the geometry dropped, like
+generated code) gave an XLA program with 26,000 multiplies for Y alone (fusion copies the kinematics into each of Y's
+490 outputs), and a Slotine–Li RK4 step that compiled in 51 s and ran in 825 µs; this layout: 8 s and 100 µs, on the
+same loaded machine (benchmarks/bench_kinematic_tree.py). M by composite rigid bodies measured 2–3 times faster than
+from the regressor's acceleration slot (n passes with a = e_k).
 
 Every method takes leading batch axes and is written with the namespace of its inputs (no writes, no branching on
 values; small products switch between multiply-and-sum and matmul on the static batch size), so the same code runs in
