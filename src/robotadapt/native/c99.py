@@ -7,7 +7,8 @@ uint8_t). Each equation of the jaxpr becomes a loop nest over its output's stati
 through linear index expressions; values that only rename a buffer (reshape, squeeze, expand_dims, a cast to the same
 type, copy) share it, nested calls (jit, custom_jvp/custom_vjp, custom_linear_solve's solve) are inlined, and the
 outputs are copied out last, so an output may alias an input (a state updated in place). Temporaries are local arrays;
-those over `STACK_LIMIT` elements are `static` (the function is then not reentrant: one caller at a time).
+those over `STACK_LIMIT` elements are `static` (the function is then not reentrant: one caller at a time). A small
+float64 value is instead held element by element as straight-line C, folded and numbered (:mod:`.elements`).
 
 Every primitive the project's controller ticks and plant steps use is here (:data:`PRIMITIVES`); another raises
 :class:`Unsupported`, naming it. Semantics follow XLA's: integer division and remainder truncate, max/min propagate
@@ -459,7 +460,7 @@ class Translator:
                                         lambda a, b: sc.binary("add", lambda p, q: BINARY["add"](p, q, ref), a, b))]
         if name == "integer_pow":
             y = params["y"]
-            return [elements.elementwise(shape, [x], lambda a: elements._number(lambda v: v ** y, a)
+            return [elements.elementwise(shape, [x], lambda a: elements.number(lambda v: v ** y, a)
                                          if elements.known(a) else sc.apply(f"pow{y}", lambda t: "*".join(
                                              [f"{t[0]}"] * y) if y > 0 else f"1.0/({'*'.join([t[0]] * -y) or '1.0'})",
                                              [a]))]

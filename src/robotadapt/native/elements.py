@@ -77,7 +77,7 @@ def text(e: Elem) -> str:
     return f"({t})" if t.startswith("-") else t
 
 
-def _number(f: Callable[..., Any], *args: Elem) -> float:
+def number(f: Callable[..., Any], *args: Elem) -> float:
     with np.errstate(all="ignore"):
         return float(f(*(np.float64(a) for a in args)))
 
@@ -121,12 +121,12 @@ class Scalars:
         return str(name)
 
     def neg(self, a: Elem) -> Elem:
-        return _number(operator.neg, a) if known(a) else self.define(f"-{a}", ("neg", a))
+        return number(operator.neg, a) if known(a) else self.define(f"-{a}", ("neg", a))
 
     def binary(self, name: str, expr: Callable[[str, str], str], a: Elem, b: Elem) -> Elem:
         """a (name) b, `expr` its C text of the operands' texts."""
         if name in _FOLD and known(a) and known(b):
-            return _number(_FOLD[name], a, b)
+            return number(_FOLD[name], a, b)
         if name == "mul":
             for x, y in ((a, b), (b, a)):
                 if known(x):
@@ -161,7 +161,7 @@ class Scalars:
         for a, b in terms:
             if b is not None:
                 if known(a) and known(b):
-                    constant = _number(operator.add, constant, _number(operator.mul, a, b))
+                    constant = number(operator.add, constant, number(operator.mul, a, b))
                     continue
                 if (known(a) and a == 0.0) or (known(b) and b == 0.0):
                     continue
@@ -173,7 +173,7 @@ class Scalars:
                 else:
                     parts.append(f"{text(x)}*{text(y)}")
             elif known(a):
-                constant = _number(operator.add, constant, a)
+                constant = number(operator.add, constant, a)
             else:
                 parts.append(a)
         if not parts:
