@@ -39,7 +39,7 @@ C_TYPES = {"float64": "double", "float32": "float", "int64": "int64_t", "int32":
 
 # primitives whose results may be held as elements (:meth:`Translator.held`), besides the elementwise ones
 MOVES = ("reshape", "squeeze", "expand_dims", "copy", "copy_p", "reduce_precision", "convert_element_type",
-         "broadcast_in_dim", "slice", "rev", "transpose", "concatenate", "stack", "split", "pad")
+         "broadcast_in_dim", "slice", "rev", "transpose", "concatenate", "stack", "split", "pad", "tile")
 # primitives that pass their operands on to nested programs (which may read held values) rather than loop over them
 NESTING = (*CALLS, "custom_jvp_call", "custom_vjp_call", "custom_vjp_call_jaxpr", "remat", "checkpoint",
            "custom_linear_solve", "while", "scan", "cond")
@@ -436,6 +436,8 @@ class Translator:
             return [np.concatenate(xs, axis=params["dimension"])]
         if name == "stack":
             return [np.stack(xs, axis=params["axis"])]
+        if name == "tile":
+            return [np.tile(x, params["reps"])]
         if name == "split":
             cuts = np.cumsum(params["sizes"])[:-1]
             return list(np.split(x, cuts, axis=params["axis"]))
@@ -604,6 +606,13 @@ class Translator:
         shape = outs[0][0]
         return self.viewed(ins[0], outs[0], lambda ix: [f"{shape[d] - 1} - ({i})" if d in dimensions else i
                                                         for d, i in enumerate(ix)])
+
+    def p_tile(self, ins: list[Ref], outs: list, reps: Sequence[int], **_: Any) -> Ref:
+        """The operand repeated `reps` times along each dimension: a view, the index taken modulo its size."""
+        x = ins[0]
+        lead = len(outs[0][0]) - len(x.shape)  # numpy's rule: the operand's shape padded with ones in front
+        return self.viewed(x, outs[0], lambda ix: [f"({i}) % {n}" if n != 1 else "0"
+                                                   for i, n in zip(ix[lead:], x.shape, strict=True)])
 
     def p_transpose(self, ins: list[Ref], outs: list, permutation: Sequence[int], **_: Any) -> Ref:
         inverse = {p: j for j, p in enumerate(permutation)}
