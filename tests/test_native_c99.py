@@ -51,6 +51,9 @@ CASES = {
                                      jax.lax.linalg.triangular_solve(jnp.triu(m), b.T, left_side=False, lower=False,
                                                                      transpose_a=True, unit_diagonal=True)),
                        (SPD, RNG.normal(size=(3, 2)))),
+    "empty values": (lambda x, y: (x.sum(axis=1), x.max(axis=1, initial=-1.0), x.min(axis=1, initial=1.0),
+                                   jnp.cumsum(x, axis=1), x @ y, jnp.sin(x) * 2.0, x.T @ x),
+                     (np.zeros((3, 0)), np.zeros((0, 2)))),
     "nested calls": (lambda x: jax.jit(lambda y: jnp.sin(y) @ y.T)(x) + jax.nn.relu(x[:, :3]), (A,)),
 }
 

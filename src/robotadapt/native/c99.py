@@ -451,7 +451,7 @@ class Translator:
             op = name[7:]
 
             def fold(row: np.ndarray) -> Any:
-                acc = row[0]
+                acc = row[0] if len(row) else (-np.inf if op == "max" else np.inf)
                 for e in row[1:]:
                     acc = sc.binary(op, lambda a, b: BINARY[op](a, b, ref), acc, e)
                 return acc

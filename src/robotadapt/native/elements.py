@@ -222,10 +222,12 @@ def dot_general(sc: Scalars, a: np.ndarray, b: np.ndarray, shape: Sequence[int],
     (lc, rc), (lb, rb) = dimension_numbers
     lfree = [d for d in range(a.ndim) if d not in lc and d not in lb]
     rfree = [d for d in range(b.ndim) if d not in rc and d not in rb]
-    batch, k = int(np.prod([a.shape[d] for d in lb], dtype=np.int64)), int(np.prod([a.shape[d] for d in lc],
-                                                                                    dtype=np.int64))
-    A = a.transpose([*lb, *lfree, *lc]).reshape(batch, -1, k)
-    B = b.transpose([*rb, *rfree, *rc]).reshape(batch, -1, k)
+    def size(x: np.ndarray, dims: Sequence[int]) -> int:
+        return int(np.prod([x.shape[d] for d in dims], dtype=np.int64))
+
+    batch, k = size(a, lb), size(a, lc)
+    A = a.transpose([*lb, *lfree, *lc]).reshape(batch, size(a, lfree), k)
+    B = b.transpose([*rb, *rfree, *rc]).reshape(batch, size(b, rfree), k)
     out = np.empty((batch, A.shape[1], B.shape[1]), dtype=object)
     for ix in np.ndindex(*out.shape):
         out[ix] = sc.total(zip(A[ix[0], ix[1]], B[ix[0], ix[2]], strict=True))
@@ -235,7 +237,8 @@ def dot_general(sc: Scalars, a: np.ndarray, b: np.ndarray, shape: Sequence[int],
 def reduce(x: np.ndarray, axes: Sequence[int], shape: Sequence[int], fn: Callable[[np.ndarray], Elem]) -> np.ndarray:
     """fn on each group of elements the reduction over `axes` combines."""
     kept = [d for d in range(x.ndim) if d not in axes]
-    rows = x.transpose([*kept, *axes]).reshape(int(np.prod(shape, dtype=np.int64)), -1)
+    rows = x.transpose([*kept, *axes]).reshape(int(np.prod(shape, dtype=np.int64)),
+                                               int(np.prod([x.shape[d] for d in axes], dtype=np.int64)))
     out = np.empty(len(rows), dtype=object)
     for k, row in enumerate(rows):
         out[k] = fn(row)
@@ -245,6 +248,8 @@ def reduce(x: np.ndarray, axes: Sequence[int], shape: Sequence[int], fn: Callabl
 def cumulative(x: np.ndarray, axis: int, reverse: bool, combine: Callable[[Elem, Elem], Elem]) -> np.ndarray:
     y = np.moveaxis(np.flip(x, axis) if reverse else x, axis, -1)
     out = np.empty(y.shape, dtype=object)
+    if y.shape[-1] == 0:
+        return np.moveaxis(out, -1, axis)
     for ix in np.ndindex(*y.shape[:-1]):
         acc = y[ix][0]
         out[ix + (0,)] = acc
