@@ -55,7 +55,7 @@ def children_peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
 
 
-PUMA = ("import time; from robotadapt.studies.scenarios import load; from robotadapt.sim.compiled import jax_module; "
+PUMA = ("import time; from robotadapt.studies.scenarios import load; from robotadapt.tracing import jax_module; "
         "jax_module(); s = load('puma560-slotine-li', ['simulation.t_final=2.0', \"simulation.backend='jax'\"]); "
         "t0 = time.perf_counter(); s.run(); print(time.perf_counter() - t0)")
 

@@ -343,15 +343,19 @@ def test_a_sampled_run_that_diverges_is_frozen_and_the_others_go_on(backend):
 
 
 def test_what_cannot_batch_in_sampled_time_is_named():
-    """A law setting that is a scalar of the program (the composite law's filter pole) differs: NotBatchable naming
-    `simulation`, so the sweep runs them one by one; a MuJoCo plant is stepped on the host: a ConfigError naming
-    `plant.engine`."""
+    """A law setting that is part of the program's structure (the composite law's bounded-gain forgetting, k0 given or
+    not) differs: NotBatchable naming `simulation`, so the sweep runs them one by one; a gain (the filter pole `a`, a
+    leaf of the law) may differ; a MuJoCo plant is stepped on the host: a ConfigError naming `plant.engine`."""
     from robotadapt.sim import Sampled
 
     s = load("example-6.6.3").setup
+    bounded = dataclasses.replace(s.controller, forgetting=0.1, k0=50.0)
     with pytest.raises(NotBatchable, match=r"^simulation: the runs differ in more than their arrays"):
-        simulate_batch(s.plant, [s.controller, dataclasses.replace(s.controller, a=2.0)], s.trajectory,
-                       t_final=0.01, integrator=Sampled(0.002, backend="jax"))
+        simulate_batch(s.plant, [s.controller, bounded], s.trajectory, t_final=0.01,
+                       integrator=Sampled(0.002, backend="jax"))
+    poles = simulate_batch(s.plant, [s.controller, dataclasses.replace(s.controller, a=2.0)], s.trajectory,
+                           t_final=0.01, integrator=Sampled(0.002, backend="jax"))
+    assert poles.ok.all()
     pytest.importorskip("mujoco")
     m = load("example-6.3.1", ["plant.engine='mujoco'"]).setup
     with pytest.raises(ConfigError, match=r"^plant\.engine: a MuJoCo plant is stepped by MuJoCo, one run at a time"):

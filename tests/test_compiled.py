@@ -75,7 +75,7 @@ def test_a_batch_equals_the_numpy_batch_run_by_run():
 def test_loops_of_one_shape_share_a_program_and_keep_their_own_gains():
     """The second controller reuses the first one's compiled program (its gains are arguments, not constants) and
     still gets its own answer."""
-    from robotadapt.sim import driver
+    from robotadapt.tracing import PROGRAMS
 
     runs = []
     for kv in (5.0, 20.0):
@@ -83,7 +83,7 @@ def test_loops_of_one_shape_share_a_program_and_keep_their_own_gains():
         a, b = (simulate_batch([Plant(ARM, PHI)], [ctrl], sinusoid(2), t_final=0.5, integrator=RK4(1e-3, backend))
                 for backend in ("numpy", "jax"))
         np.testing.assert_allclose(b.run(0).x, a.run(0).x, rtol=0, atol=1e-9)
-        runs.append((a.run(0).x[-1], len(driver.PROGRAMS)))
+        runs.append((a.run(0).x[-1], len(PROGRAMS)))
     assert not np.allclose(runs[0][0], runs[1][0])
     assert runs[1][1] == runs[0][1]
 

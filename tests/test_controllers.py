@@ -282,7 +282,7 @@ def test_batch_equals_stacked_single_calls(name):
         tau_i, dx_i = ctrl(t[idx], x[idx], q[idx], dq[idx], Reference(*(a[idx] for a in ref)))
         np.testing.assert_allclose(tau[idx], tau_i, rtol=1e-13, atol=1e-12)
         np.testing.assert_allclose(dx[idx], dx_i, rtol=1e-13, atol=1e-12)
-    if hasattr(ctrl, "lyapunov"):
+    if ctrl.has("lyapunov"):
         phi = np.array([0.8, 2.3])
         V = ctrl.lyapunov(t, x, q, dq, ref, phi)
         assert V.shape == lead

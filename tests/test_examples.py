@@ -8,9 +8,13 @@ the Gram matrix of the desired regressor Y_d = [q̈_d, q̇_d] of the one-link ar
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 import pytest
 
+from robotadapt.controllers import Law
 from robotadapt.sim import simulate
 from robotadapt.studies.scenarios import load
 
@@ -50,12 +54,15 @@ def two_link_mass_matrix(q: np.ndarray) -> np.ndarray:
     return np.stack([np.stack([m11, m12], -1), np.stack([m12, m22], -1)], -2)
 
 
-class FlippedUpdate:
+@dataclass(frozen=True, eq=False)
+class FlippedUpdate(Law):
     """A controller whose update law has the opposite sign, dφ̂/dt = −Γ Yᵀ r; torque and monitors unchanged."""
 
-    def __init__(self, inner):
-        self.inner = inner
-        self.model = inner.model
+    inner: Any
+
+    @property
+    def model(self):
+        return self.inner.model
 
     @property
     def state_names(self):

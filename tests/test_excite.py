@@ -13,9 +13,9 @@ import pytest
 from robotadapt.cli import main
 from robotadapt.robots.identifiability import base_parameters
 from robotadapt.robots.kinematic_tree import KinematicTree
-from robotadapt.sim.compiled import float64
 from robotadapt.studies.excite import Design, Programs, excite, resolve_limits
 from robotadapt.studies.scenarios import load
+from robotadapt.tracing import float64
 from test_kinematic_tree import URDF  # a two-link arm with <limit lower=-1 upper=1 effort=10 velocity=1>
 
 

@@ -69,13 +69,13 @@ def test_a_second_run_reuses_the_first_runs_program(name):
     """A run leaves its law as it was (the inverses of Γ or K_I a Lyapunov or storage value needs are computed at
     construction, not at the first value): a second run of one scenario takes the first one's program, not a new
     compilation (a gcc build of seconds for an n-DOF arm)."""
-    from robotadapt.sim import driver
+    from robotadapt.tracing import PROGRAMS
 
     scenario = load(name, ["simulation.backend='c'", "simulation.t_final=0.2"])
     scenario.run()
-    before = set(driver.NATIVE)
+    before = PROGRAMS.keys()
     scenario.run()
-    assert set(driver.NATIVE) == before
+    assert PROGRAMS.keys() == before
 
 
 def test_a_warm_process_runs_c_without_importing_jax():
@@ -141,7 +141,7 @@ def test_the_reference_evaluated_inside_the_c_program_equals_the_fed_one(kind, l
 def test_a_users_trajectory_is_fed_and_its_kind_shares_a_program():
     """A trajectory from outside the package is sampled in Python and fed (the program cannot know it is traceable);
     two package trajectories of one kind and shape share one program (their arrays are its arguments)."""
-    from robotadapt.sim import driver
+    from robotadapt.tracing import PROGRAMS
 
     class Mine:
         n = 2
@@ -153,7 +153,7 @@ def test_a_users_trajectory_is_fed_and_its_kind_shares_a_program():
     c, ref = (_two_link_run(Mine(), b, 1) for b in ("c", "numpy"))
     np.testing.assert_allclose(_state(c), _state(ref), rtol=0, atol=1e-12)
     _two_link_run(sum_of_sines(2, 0.5, 1.0), "c", 1)
-    before = set(driver.NATIVE)
+    before = PROGRAMS.keys()
     other = _two_link_run(sum_of_sines(2, 0.9, 2.0), "c", 1)
-    assert set(driver.NATIVE) == before
+    assert PROGRAMS.keys() == before
     np.testing.assert_allclose(other.q_des[-1], 0.9 * np.sin(2.0 * other.t[-1]), rtol=0, atol=1e-12)

@@ -197,7 +197,7 @@ def test_the_actuator_and_the_sensor_are_pure_and_trace_under_jax(x64):
     np.testing.assert_array_equal(u[:2], 0.0)  # the delay
     np.testing.assert_array_equal(ddq_m[0], 0.0)
     jax = pytest.importorskip("jax")
-    from robotadapt.sim.compiled import jax_module
+    from robotadapt.tracing import jax_module
 
     jnp = jax_module().numpy
     traced = jax.jit(lambda *a: _effect_steps(actuator, sensor, *a))(*(jnp.asarray(a) for a in (q, dq, taus, noise)))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from robotadapt.realtime import RealtimeController
-from robotadapt.sim.compiled import jax_module
+from robotadapt.tracing import jax_module
 
 
 def panda() -> RealtimeController:

@@ -256,7 +256,7 @@ def test_the_delay_line_is_read_at_slot_k_mod_N_and_written_without_touching_the
     np.testing.assert_array_equal(new.head, before[3])
     np.testing.assert_array_equal(Ring.start(before).head, before[0])
     jnp = pytest.importorskip("jax").numpy
-    from robotadapt.sim.compiled import jax_module
+    from robotadapt.tracing import jax_module
 
     jax = jax_module()
     applied_j, new_j = jax.jit(lambda k, z, line: sample(loop, k, 0.3, z, line, Reference(*ref)))(

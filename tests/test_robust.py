@@ -31,10 +31,6 @@ from scipy.integrate import trapezoid
 from robotadapt.controllers import (
     PD,
     AdaptiveComputedTorque,
-    HasFilteredError,
-    HasLyapunov,
-    HasProjection,
-    HasRegressor,
     InertiaRelated,
 )
 from robotadapt.controllers.robust import SignRobust
@@ -208,15 +204,20 @@ def test_without_kd_the_disturbance_can_raise_v():
 
 
 def test_optional_parts_follow_the_base():
-    """The wrapper has a Lyapunov function and a regressor (for the passivity integral) exactly when its base does."""
+    """The wrapper has a Lyapunov function and a regressor (for the passivity integral) exactly when its base does: it
+    forwards every hook of the law base to its base, explicitly, and answers `has` for it."""
     robust_sl = SignRobust(BOOK, slotine_li(BOOK), kd=1.0)
-    assert isinstance(robust_sl, HasLyapunov) and isinstance(robust_sl, HasRegressor)
-    assert isinstance(robust_sl, HasFilteredError) and not isinstance(robust_sl, HasProjection)
+    assert robust_sl.has("lyapunov") and robust_sl.has("regressor")
+    assert robust_sl.has("filtered_error") and not robust_sl.has("project") and not robust_sl.has("guard")
     robust_pd = SignRobust(BOOK, PD(BOOK, Kp=25.0, Kv=10.0, phi_hat0=np.zeros(2)), kd=1.0)
-    assert isinstance(robust_pd, HasFilteredError)
-    assert not isinstance(robust_pd, HasLyapunov) and not isinstance(robust_pd, HasRegressor)
-    with pytest.raises(AttributeError):
-        robust_pd.lyapunov  # noqa: B018
+    assert robust_pd.has("filtered_error")
+    assert not robust_pd.has("lyapunov") and not robust_pd.has("regressor")
+    q, dq, ref = np.array([0.3, -0.2]), np.array([0.1, 0.4]), sinusoid(2)(0.5)
+    assert robust_pd.lyapunov(0.5, np.zeros(0), q, dq, ref, np.array([0.8, 2.3])) is None  # the base's default
+    phi = np.array([0.8, 2.3])
+    x = robust_sl.initial_state(q, dq)
+    np.testing.assert_array_equal(robust_sl.lyapunov(0.5, x, q, dq, ref, phi),
+                                  robust_sl.base.lyapunov(0.5, x, q, dq, ref, phi))
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -372,7 +373,7 @@ def test_wrapper_reports_the_landau_pi_estimate_and_its_passivity_integral():
     K_I, F_P = np.array([[15.0, 2.0], [2.0, 6.0]]), np.array([[2.0, 0.3], [0.3, 1.0]])
     base = PassivityBased(BOOK, pid_servo(2, FULL["Lam"], np.eye(2)), FULL["Kv"], LandauPI(2, K_I, F_P), np.zeros(2))
     wrapped = SignRobust(BOOK, base, kd=0.0)
-    assert hasattr(wrapped, "phi_hat_at")
+    assert wrapped.has("phi_hat_at")
     phi = np.array([0.8, 2.3])
     plant, traj = Plant(BOOK, phi), sinusoid(2)
     runs = [simulate(plant, c, traj, t_final=2.0, integrator=RK4(1e-3), log_every=k) for c, k in ((base, 10),

@@ -22,7 +22,7 @@ import pytest
 from scipy.linalg import expm
 
 from robotadapt.cli import main
-from robotadapt.controllers import PD, InertiaRelated
+from robotadapt.controllers import PD, InertiaRelated, Law
 from robotadapt.plant import Plant
 from robotadapt.plant.actuators import Actuator, DCMotor
 from robotadapt.plant.sensors import Sensor
@@ -134,7 +134,7 @@ def test_sampled_runs_tend_to_the_continuous_run_to_first_order(scenario):
 
 
 @dataclass(frozen=True, eq=False)
-class FilteredPD:
+class FilteredPD(Law):
     """Test double: PD plus a first-order filter state, dx/dt = −a x + e (x does not enter the torque)."""
 
     model: Any
@@ -265,7 +265,7 @@ def test_the_controller_runs_only_at_the_ticks():
     inner = InertiaRelated(arm, Lam=2.5, Kv=10, Gamma=20, phi_hat0=[0, 0])
 
     @dataclass(frozen=True, eq=False)
-    class Recording:
+    class Recording(Law):
         model: Any = arm
         state_names: tuple[str, ...] = inner.state_names
 
@@ -457,7 +457,7 @@ def test_a_diverging_run_stops_at_the_same_tick_compiled(monkeypatch, log_every)
 
 
 def test_sampled_loops_of_one_shape_share_a_program_and_keep_their_own_gains(monkeypatch):
-    from robotadapt.sim import driver
+    from robotadapt.tracing import PROGRAMS
 
     arm = TwoLinkArm()
     finals, programs = [], []
@@ -467,7 +467,7 @@ def test_sampled_loops_of_one_shape_share_a_program_and_keep_their_own_gains(mon
                                                             integrator=Sampled(1e-3)))
         assert_same_run(a, b)
         finals.append(b.x[-1])
-        programs.append(len(driver.PROGRAMS))
+        programs.append(len(PROGRAMS))
     assert not np.allclose(finals[0], finals[1]) and programs[1] == programs[0]
 
 
@@ -480,7 +480,7 @@ def test_the_delay_line_is_written_into_a_new_array(x64):
     np.testing.assert_array_equal(line, before)
     np.testing.assert_array_equal(new, [[0, 1], [2, 3], [-1, -2], [6, 7]])
     jax = pytest.importorskip("jax")
-    from robotadapt.sim.compiled import jax_module
+    from robotadapt.tracing import jax_module
 
     jnp = jax_module().numpy
     traced = jax.jit(ring_write)(jnp.asarray(line), 2, jnp.asarray([-1.0, -2.0]))

@@ -11,12 +11,13 @@ import pytest
 
 from robotadapt.analysis.metrics import metrics
 from robotadapt.cli import main
-from robotadapt.sim.compiled import jax_module
-from robotadapt.sim.gradient import Rollout, replace_at
+from robotadapt.pytree import replace as replace_at
+from robotadapt.sim.gradient import Rollout
 from robotadapt.sim.loop import ClosedLoop
 from robotadapt.studies.gain_space import locate, parse_objective, tuned_scenario
 from robotadapt.studies.scenarios import load
 from robotadapt.studies.tune import SCREEN, Problem, optimise, score
+from robotadapt.tracing import jax_module
 from tuning_checks import assert_gradient_is_central_differences
 
 SHORT = ["simulation.t_final=1.0", "simulation.backend='jax'"]
@@ -48,8 +49,7 @@ def test_the_differentiable_run_is_the_compiled_forward_run(name):
     scenario, _ = law(name)
     s = scenario.setup
     reference = scenario.run()
-    ctrl = s.controller.prepare(s.trajectory, s.integrator.dt, s.t_final) if hasattr(s.controller, "prepare") \
-        else s.controller
+    ctrl = s.controller.prepare(s.trajectory, s.integrator.dt, s.t_final)
     loop = ClosedLoop(s.plant, ctrl, s.plant.model.n)
     z0 = np.concatenate([s.plant.initial_state(s.q0, s.dq0), ctrl.initial_state(s.q0, s.dq0)])
     t, e, tau, _ = Rollout.make(loop, s.trajectory, s.integrator, s.t_final, s.log_every).signals(loop, s.trajectory, z0)

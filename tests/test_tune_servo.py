@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from robotadapt.controllers.passivity import PidServo
-from robotadapt.sim.gradient import replace_at
+from robotadapt.pytree import replace as replace_at
 from robotadapt.studies.gain_space import locate, parse_objective
 from robotadapt.studies.scenarios import load
 from robotadapt.studies.tune import Problem, score, tune

@@ -23,11 +23,12 @@ from typing import Any
 
 import numpy as np
 
+from robotadapt.controllers import Law
 from robotadapt.controllers.base import slotine_li_regressor
 
 
 @dataclass(frozen=True, eq=False)
-class Gravityless:
+class Gravityless(Law):
     """τ = K_v r: a PD on r = ė + Λe (Table 6.3.1's r), no estimate."""
 
     model: Any
@@ -92,9 +93,9 @@ def test_a_wrong_user_kind_is_one_line_naming_the_field(user_module, tmp_path, c
 
 
 def test_a_user_kind_in_a_nested_table_takes_what_that_registry_takes(user_module):
-    with pytest.raises(ConfigError, match=r"^controller\.law\.kind: module 'mylaws' has no 'Law'"):
+    with pytest.raises(ConfigError, match=r"^controller\.law\.kind: module 'mylaws' has no 'NoSuchLaw'"):
         build("controller", {"kind": "passivity", "Kv": 1.0, "servo": {"kind": "pd", "Lam": 1.0},
-                             "law": {"kind": "mylaws:Law"}}, "controller", load("example-6.3.1").setup.plant.model)
+                             "law": {"kind": "mylaws:NoSuchLaw"}}, "controller", load("example-6.3.1").setup.plant.model)
 
 
 def test_auto_says_when_it_steps_a_law_jax_cannot_trace_with_numpy():

@@ -38,17 +38,16 @@ from typing import Any
 import numpy as np
 
 from .arrays import array_namespace
-from .controllers.base import HasDelayLine, Prepares
 from .native.build import INSTALL, compiler, library, shared_library
 from .native.c99 import Unsupported
 from .native.controller import Export, export
 from .plant.actuators import Actuator
 from .plant.sensors import Sensor
-from .sim.compiled import float64, jax_module
 from .sim.integrators import Sampled, check_backend
 from .sim.loop import ClosedLoop
 from .sim.sampled import Carry, Inputs, Tick
 from .studies.scenarios import load
+from .tracing import float64, jax_module
 from .trajectories import Trajectory
 from .validation import ConfigError, as_scalar, as_vector
 
@@ -125,12 +124,11 @@ class RealtimeController:
         period = (setup.integrator.control_period if isinstance(setup.integrator, Sampled)
                   else getattr(setup.integrator, "dt", 1e-3))
         controller = setup.controller
-        if isinstance(controller, Prepares):
-            controller = controller.prepare(setup.trajectory, period, setup.t_final)
+        controller = controller.prepare(setup.trajectory, period, setup.t_final)
         n = setup.plant.model.n
         opts = Sampled(period)
         loop_tick = Tick(ClosedLoop(setup.plant, controller, n), opts, Sensor(n), Actuator(n), np.inf,
-                         isinstance(controller, HasDelayLine))
+                         controller.has("delay_line"))
         return cls(loop_tick, setup.trajectory, period, backend)
 
     @property

@@ -12,6 +12,7 @@ from typing import Any, NamedTuple, Protocol
 import numpy as np
 
 from .arrays import array_namespace
+from .pytree import Module
 from .validation import ConfigError, as_array, as_scalar, as_vector
 
 Array = Any
@@ -42,7 +43,7 @@ def _t(t: Array) -> tuple[Any, Array]:
 
 
 @dataclass(frozen=True, eq=False)
-class SumOfSines:
+class SumOfSines(Module):
     """q_des,i(t) = offset_i + Σ_k A_ki sin(ω_k t + φ_ki): a sinusoid per joint (one row) or a persistently exciting sum.
 
     `amplitude` and `phase` have shape `(k, n)`, `omega` shape `(k,)` or `(k, n)`, `offset` shape `(n,)`.
@@ -162,7 +163,7 @@ def sinusoid(n: int, amplitude: Any = 1.0, omega: Any = 1.0, phase: Any = 0.0, o
 
 
 @dataclass(frozen=True, eq=False)
-class ExponentialStep:
+class ExponentialStep(Module):
     """q_des = start + (final − start)(1 − e^{−a t}): the book's non-exciting `1 − e^{−2t}` (Example 6.5.1)."""
 
     final: Array
@@ -180,7 +181,7 @@ class ExponentialStep:
 
 
 @dataclass(frozen=True, eq=False)
-class Quintic:
+class Quintic(Module):
     """Point-to-point quintic from `q0` at `t0` to `q1` at `t1`, zero velocity and acceleration at both ends; held after."""
 
     q0: Array
@@ -207,7 +208,7 @@ class Quintic:
 
 
 @dataclass(frozen=True, eq=False)
-class Constant:
+class Constant(Module):
     """A set point: q_des = value, q̇_des = q̈_des = 0."""
 
     value: Array

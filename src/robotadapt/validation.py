@@ -43,6 +43,12 @@ def as_array(value: Any, field: str) -> Array:
     return arr
 
 
+def scalar_gain(value: Any, field: str, *, positive: bool = True, nonnegative: bool = False) -> np.ndarray:
+    """:func:`as_scalar` held as a 0-d float array: a leaf of the law's tree, so a compiled program takes it as an
+    argument and a new value does not recompile (robotadapt.pytree)."""
+    return np.asarray(as_scalar(value, field, positive=positive and not nonnegative, nonnegative=nonnegative))
+
+
 def as_scalar(value: Any, field: str, *, positive: bool = False, nonnegative: bool = False,
               maximum: float | None = None) -> float:
     """A finite float (optionally > 0 or ≥ 0, and at most `maximum`)."""

@@ -1,13 +1,7 @@
-"""Controllers: `tau, dx = ctrl(t, x, q, dq, ref)`, pure, batch-capable, gains validated at construction."""
+"""Controllers: `tau, dx = ctrl(t, x, q, dq, ref)`, pure, batch-capable, gains validated at construction; every law
+derives from :class:`Law` (its optional parts are hooks with defaults)."""
 
-from .base import (
-    Controller,
-    HasFilteredError,
-    HasLyapunov,
-    HasProjection,
-    HasRegressor,
-    NeedsAcceleration,
-)
+from .base import Law
 from .baseline import PD, ComputedTorque, PDGravity
 from .composite import Composite
 from .computed_torque import AdaptiveComputedTorque
@@ -23,13 +17,8 @@ __all__ = [
     "AdaptiveComputedTorque",
     "Composite",
     "ComputedTorque",
-    "Controller",
-    "HasFilteredError",
-    "HasLyapunov",
-    "HasProjection",
-    "HasRegressor",
     "InertiaRelated",
-    "NeedsAcceleration",
+    "Law",
     "PDGravity",
     "PassivityBased",
     "Repetitive",

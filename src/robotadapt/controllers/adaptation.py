@@ -12,13 +12,13 @@ state `xa` (shape `(..., state_size)`):
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from functools import cached_property
-from typing import Any, ClassVar, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from ..arrays import array_namespace, quad
-from ..validation import as_gain, as_scalar
+from ..pytree import Module, derived
+from ..validation import as_gain, scalar_gain
 from .base import inverse
 
 Array = Any
@@ -52,7 +52,7 @@ class UpdateLaw(Protocol):
         """The parameter part of the controller's Lyapunov function for the true φ (monitors only)."""
 
 
-class EstimateLaw:
+class EstimateLaw(Module):
     """The state of a law that keeps one vector of p parameters (φ̂ or φ̂_I), starting at φ̂(0): a mixin of the laws'
     dataclasses, which hold `p`."""
 
@@ -80,14 +80,10 @@ class Gradient(EstimateLaw):
 
     p: int
     Gamma: Any
-    #: the constants computed from Γ, again from a traced Γ (tuning)
-    derived: ClassVar[tuple[str, ...]] = ("_Gamma_inv",)
-
     def __post_init__(self) -> None:
         object.__setattr__(self, "Gamma", as_gain(self.Gamma, self.p, "controller.law.Gamma"))
-        _ = self._Gamma_inv  # now, not at the first storage value: a run leaves the law's skeleton as it was
 
-    @cached_property
+    @derived
     def _Gamma_inv(self) -> Array:
         return inverse(self.Gamma)
 
@@ -114,15 +110,11 @@ class LandauPI(EstimateLaw):
     p: int
     K_I: Any
     F_p: Any
-    #: the constants computed from K_I, again from a traced K_I (tuning)
-    derived: ClassVar[tuple[str, ...]] = ("_K_I_inv",)
-
     def __post_init__(self) -> None:
         object.__setattr__(self, "K_I", as_gain(self.K_I, self.p, "controller.law.K_I"))
         object.__setattr__(self, "F_p", as_gain(self.F_p, self.p, "controller.law.F_p", semidefinite=True))
-        _ = self._K_I_inv  # now: a run leaves the law's skeleton as it was
 
-    @cached_property
+    @derived
     def _K_I_inv(self) -> Array:
         return inverse(self.K_I)
 
@@ -159,8 +151,8 @@ class SwitchingSigma(Gradient):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        object.__setattr__(self, "phi0", as_scalar(self.phi0, "controller.law.phi0", positive=True))
-        object.__setattr__(self, "sigma0", as_scalar(self.sigma0, "controller.law.sigma0", positive=True))
+        object.__setattr__(self, "phi0", scalar_gain(self.phi0, "controller.law.phi0"))
+        object.__setattr__(self, "sigma0", scalar_gain(self.sigma0, "controller.law.sigma0"))
 
     def sigma(self, xa: Array) -> Array:
         """σ_s of (6.7.14): 0 inside ‖φ̂‖ < φ0, a linear ramp to σ0 at 2φ0, σ0 beyond."""

@@ -8,21 +8,21 @@ integrals) comes in and its derivative goes out::
 with `q, dq` of shape `(..., n)`, `x` of shape `(..., s)`, `ref` a :class:`~robotadapt.trajectories.Reference`.
 Controllers never see the true φ; only the optional monitors (`lyapunov`) take it, to evaluate the theory's V(t).
 
-Optional parts a controller may have, each a protocol below: a Lyapunov function, a filtered error, a regressor with its
-passivity output (for the integral (6.4.4)), acceleration feedback (Table 6.2.1 needs q̈), and a projection of its state
-applied after every integration step. A law whose own assumptions can fail on a state (M̂ singular) has a guard
-(:class:`HasGuard`), an indicator the loop reads on numpy and traced arrays alike (traced code cannot raise): the
-simulator ends the run there and keeps the partial result.
+Every law derives from :class:`Law`, whose hooks (a Lyapunov function, a filtered error, a regressor with its passivity
+output for the integral (6.4.4), acceleration feedback (Table 6.2.1 needs q̈), a projection of its state, a guard, a
+delay line, tables prepared ahead, a torque filter) have defaults the simulator always calls. A law whose own
+assumptions can fail on a state (M̂ singular) has a guard, an indicator the loop reads on numpy and traced arrays alike
+(traced code cannot raise): the simulator ends the run there and keeps the partial result.
 """
 
 from __future__ import annotations
 
-from functools import cached_property
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ..arrays import array_namespace, matvec
+from ..pytree import Module, derived
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_vector
@@ -31,133 +31,157 @@ from .geometry import Euclidean, Natural, adaptation_gains, geometry
 Array = Any
 
 
-class ControlLaw(Protocol):
-    """What every controller has: its model, its state's layout and initial value, and its estimate."""
+class Law(Module):
+    """The base of every control law (docs/laws.md#model, docs/tutorial.md): a frozen dataclass holding constants only
+    (its model, gains, initial estimate), a pytree whose gains are leaves (:mod:`robotadapt.pytree`). A law gives its
+    torque and state derivative (`__call__`), its state's names and initial value and its estimate; every other part
+    of the contract is a hook with a default here, which the simulator always calls, so a law overrides what it has and
+    nothing is probed:
+
+    ========================  ====================================================  ===========================
+    hook                      what it is                                             default
+    ========================  ====================================================  ===========================
+    `guard`, `stop_reason`    where the law's own assumptions fail (M̂ singular)     None: always holds
+    `project`                 the state mapped back into its admissible set          identity
+    `applied`                 dx/dt with the torque filter driven by the applied u   dx unchanged (no filter)
+    `delay_line`, `sample`    a delay line of one period (7.2.32)                    None: no line
+    `prepare`                 tables computed ahead of the run (Y_d)                 itself
+    `step`                    the discrete step of a sampled-data tick               x + h·dx
+    `regressor`               (Z, r), the passivity output of (6.4.4)                None: no passivity output
+    `regressor_products`      (Z φ, Zᵀ r, r) without forming Z where it can          through `regressor`
+    `filtered_error`          the filtered error r the law drives to zero            None
+    `lyapunov`                V of the law's proof, with the true φ                  None
+    `phi_hat_at`              the φ̂ its torque uses when signals enter it (6.4.20)  `phi_hat(x)`
+    `passivity_caveat`        why the gains may not imply the passivity claim        None
+    `monitors`                the law's own monitor series (λ_min(P⁻¹))             none
+    ========================  ====================================================  ===========================
+
+    A law whose update reads the measured q̈ (Table 6.2.1) sets `needs_acceleration` and gives `torque` and `update`
+    in place of `__call__`. The facts the simulator fixes before a run (whether the law has a guard, a delay line, a
+    passivity output, a torque filter) are read off which hooks the law overrides (:meth:`has`), once."""
 
     model: RobotModel
+    #: Table 6.2.1's split: `torque` needs no q̈, `update` takes the plant's q̈ for the torque just applied
+    needs_acceleration: ClassVar[bool] = False
+
+    def has(self, hook: str) -> bool:
+        """Whether the law gives its own `hook` (a wrapper answers for what it wraps)."""
+        return getattr(type(self), hook) is not getattr(Law, hook)
+
+    @property
+    def records(self) -> int:
+        """Trailing entries of x kept for a monitor only (the repetitive law's window integrals of V): the divergence
+        guard skips them."""
+        return 0
 
     @property
     def state_names(self) -> tuple[str, ...]:
         """Names of the entries of the state vector x."""
+        raise NotImplementedError(f"{type(self).__name__} gives no state_names")
 
     def initial_state(self, q0: Array, dq0: Array) -> Array:
         """The state x at t = 0, given the first measurement (filters that start from it need it)."""
+        raise NotImplementedError(f"{type(self).__name__} gives no initial_state")
 
     def phi_hat(self, x: Array) -> Array:
-        """The parameter estimate held in (or fixed by) the controller, shape `x.shape[:-1] + (p,)`."""
-
-
-@runtime_checkable
-class Controller(ControlLaw, Protocol):
-    """A control law whose torque and state derivative need only (t, x, q, q̇, ref)."""
+        """The parameter estimate held in (or fixed by) the law, shape `x.shape[:-1] + (p,)`."""
+        raise NotImplementedError(f"{type(self).__name__} gives no phi_hat")
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
-        """(τ, dx/dt): the torque and the derivative of the controller's state, e.g. (6.3.14) and (6.3.16)."""
-
-
-@runtime_checkable
-class HasLyapunov(Protocol):
-    def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array:
-        """The Lyapunov function of the controller's stability proof, evaluated with the true φ."""
-
-
-@runtime_checkable
-class HasRegressor(Protocol):
-    def regressor(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
-        """(Z, r): the regressor multiplying φ̂ in the torque and the filtered error, so that M ṙ + V_m r = Zφ − τ;
-        the passivity integral (6.4.4) is ∫ −rᵀ Z φ̃."""
-
-
-@runtime_checkable
-class HasRegressorProducts(Protocol):
-    def regressor_products(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference,
-                           phi: Array) -> tuple[Array, Array, Array]:
-        """(Z φ, Zᵀ r, r) for the law's (Z, r) of `regressor`, without forming Z where the model can
-        (:meth:`~robotadapt.robots.base.RobotModel.regressor_products`): the torque's Z φ̂, the update's Zᵀ r and the
-        passivity integrand −(Zᵀ r)ᵀ φ̃ from one pass."""
-
-
-@runtime_checkable
-class NeedsAcceleration(ControlLaw, Protocol):
-    """A controller whose update law needs the measured joint acceleration (Table 6.2.1). Its torque must not."""
+        """(τ, dx/dt): the torque and the derivative of the law's state, e.g. (6.3.14) and (6.3.16)."""
+        raise NotImplementedError(f"{type(self).__name__} gives no __call__")
 
     def torque(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
-        """τ from the state and the measured q, q̇ (6.2.5)."""
+        """τ alone (a law with `needs_acceleration`: from the state and the measured q, q̇, (6.2.5))."""
+        return self(t, x, q, dq, ref)[0]
 
     def update(self, t: Array, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference) -> Array:
-        """dx/dt with the measured q̈ (6.2.19)."""
+        """dx/dt with the measured q̈ (a law with `needs_acceleration`, (6.2.19)); else the state derivative of
+        `__call__`."""
+        return self(t, x, q, dq, ref)[1]
 
-
-@runtime_checkable
-class HasGuard(Protocol):
-    """A law whose assumptions can fail on a state (adaptive computed torque: M̂(q) must stay positive definite). Its
-    torque or update returns NaN there, raising nothing (traced arrays cannot raise); the loop reads `guard` at every
-    evaluation and stops the run itself, with `stop_reason`."""
-
-    def guard(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
-        """True where the law's assumption holds at (x, q), a boolean of shape `x.shape[:-1]`. Raises nothing."""
+    def guard(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array | None:
+        """True where the law's assumption holds at (x, q), a boolean of shape `x.shape[:-1]`; None: it always holds.
+        Raises nothing (traced arrays cannot raise): the torque or update is NaN where it fails, and the loop stops
+        the run there itself, with `stop_reason`."""
+        return None
 
     def stop_reason(self, q: Array, x: Array) -> str:
         """Why a run stops at (q, x) where the guard fails, in words (numpy arrays)."""
+        return "the law's guard failed"
 
-
-@runtime_checkable
-class FiltersTorque(Protocol):
-    """A controller whose state filters the torque the plant receives (the composite law's τ_f = f * τ,
-    docs/laws.md#composite).
-
-    Its own derivative assumes the plant receives the torque it commands; where an actuator saturates, delays or
-    rate-limits it, or a wrapper adds to it, the simulator passes the applied torque through `applied`."""
+    def project(self, x: Array) -> Array:
+        """The state mapped back into its admissible set (applied after every fixed step and tick)."""
+        return x
 
     def applied(self, dx: Array, tau: Array, u: Array) -> Array:
-        """dx/dt with the torque filter driven by the applied torque `u` instead of the command `tau`."""
+        """dx/dt with a torque filter in the state driven by the torque the plant receives, `u`, instead of the command
+        `tau` (the composite law's τ_f = f * τ): where an actuator saturates, delays or rate-limits the torque."""
+        return dx
 
-
-@runtime_checkable
-class HasProjection(Protocol):
-    def project(self, x: Array) -> Array:
-        """Map the state back into its admissible set (applied after every fixed step)."""
-
-
-@runtime_checkable
-class HasDelayLine(Protocol):
-    """A controller with a delay line of one period (the repetitive law (7.2.32)); it needs the fixed-step integrator.
-
-    At the start of every step k the simulator reads `past` = the value stored N steps earlier, calls `sample`, writes
-    back what it returns, and keeps the new state x constant over the step's stages (x holds the sampled part)."""
-
-    def delay_line(self, dt: float, q0: Array, dq0: Array) -> Array:
-        """The initial contents of the line, shape `(N, ...)`, N steps of `dt` per period."""
+    def delay_line(self, dt: float, q0: Array, dq0: Array) -> Array | None:
+        """The initial contents `(N, ...)` of a delay line of one period, N steps of `dt` (the repetitive law (7.2.32));
+        None: no line. At the start of every step k the simulator reads the value stored N steps earlier, calls
+        `sample`, writes back what it returns, and holds the new state over the step's stages."""
+        return None
 
     def sample(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, past: Array) -> tuple[Array, Array]:
-        """(new state x, value to store in the line now)."""
+        """(new state x, value to store in the line now) at a step's start (a law with a delay line)."""
+        return x, past
 
-
-@runtime_checkable
-class HasStep(Protocol):
-    """A law whose state lives on a manifold (the natural law's pseudo-inertias): a sampled-data tick moves it by
-    `step` (the exponential map) in place of x + h·dx."""
+    def prepare(self, trajectory: Any, dt: float, t_final: float) -> Law:
+        """The law with tables computed ahead of the run (Y_d along the desired trajectory); itself by default."""
+        return self
 
     def step(self, x: Array, dx: Array, h: Any) -> Array:
-        """x after a step of length h along dx/dt."""
+        """x after a sampled-data tick of length h along dx/dt: x + h·dx, or a manifold's exponential map (the natural
+        law's pseudo-inertias)."""
+        return x + h * dx
 
+    def regressor(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array] | None:
+        """(Z, r): the regressor multiplying φ̂ in the torque and the filtered error, so that M ṙ + V_m r = Zφ − τ; the
+        passivity integral (6.4.4) is ∫ −rᵀ Z φ̃. None: the law has no passivity output."""
+        return None
 
-@runtime_checkable
-class Prepares(Protocol):
-    def prepare(self, trajectory: Any, dt: float, t_final: float) -> Controller:
-        """A copy of the controller with tables computed ahead of the run (e.g. Y_d along the desired trajectory)."""
+    def regressor_products(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference,
+                           phi: Array) -> tuple[Array, Array, Array]:
+        """(Z φ, Zᵀ r, r) for `regressor`'s (Z, r): the torque's Z φ̂, the update's Zᵀ r and the passivity integrand
+        −(Zᵀ r)ᵀ φ̃ from one pass; a law whose model gives them without forming Z overrides it
+        (:meth:`~robotadapt.robots.base.RobotModel.regressor_products`)."""
+        found = self.regressor(t, x, q, dq, ref)
+        if found is None:
+            raise NotImplementedError(f"{type(self).__name__} has no passivity output (regressor)")
+        Z, r = found
+        return matvec(Z, phi), matvec(Z.mT, r), r
 
+    def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array | None:
+        """The filtered tracking error r the law drives to zero; None: the law has none."""
+        return None
 
-@runtime_checkable
-class HasInstantEstimate(Protocol):
+    def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array | None:
+        """The Lyapunov function of the law's stability proof, evaluated with the true φ (monitors only); None."""
+        return None
+
     def phi_hat_at(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
-        """The φ̂ the torque uses when it depends on the signals too (Landau's PI law: φ̂_I + F_p Zᵀ r, (6.4.20))."""
+        """The φ̂ the torque uses (Landau's PI law: φ̂_I + F_p Zᵀ r, (6.4.20)); `phi_hat(x)` by default."""
+        return self.phi_hat(x)
+
+    def passivity_caveat(self) -> str | None:
+        """Why the law's gains may not imply its passivity claim (the σ-modification's), or None."""
+        return None
+
+    def monitors(self, x: Array) -> dict[str, Array]:
+        """The law's own monitor series at the logged states (the composite law's λ_min(P⁻¹), (6.6.27))."""
+        return {}
 
 
-@runtime_checkable
-class HasFilteredError(Protocol):
-    def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
-        """The filtered tracking error r the controller drives to zero."""
+def as_law(controller: Any) -> Law:
+    """`controller`, checked to be a :class:`Law` (the argument check of the simulator's front doors: every optional
+    hook it calls has its default there), else a one-line ConfigError naming the fix."""
+    if not isinstance(controller, Law):
+        raise ConfigError("controller", f"{type(controller).__name__} is not a law: derive it from "
+                          "robotadapt.controllers.Law (docs/tutorial.md), which gives every optional part a default")
+    return controller
 
 
 def errors(q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
@@ -203,7 +227,7 @@ def estimate(obj: Any, name: str = "phi_hat0") -> None:
     freeze(obj, **{name: as_vector(getattr(obj, name), obj.model.p, f"controller.{name}", broadcast=False)})
 
 
-class EstimateState:
+class EstimateState(Law):
     """The state of a law that adapts φ̂ with a gain (Slotine–Li, adaptive computed torque, DCAL: Tables 6.3.1, 6.2.1,
     7.2.1): the book's Euclidean update with Γ (state x = φ̂), or `adaptation = "natural"` with the scalar γ (state:
     log-Cholesky coordinates of each link's pseudo-inertia, :mod:`robotadapt.controllers.geometry`). A mixin of the
@@ -215,9 +239,6 @@ class EstimateState:
     phi_hat0: Array
     adaptation: str
     gamma: Any
-    #: the cached constants built from Γ or γ (a tuned gain rebuilds them; studies.gain_space)
-    derived: ClassVar[tuple[str, ...]] = ("geometry",)
-
     def adapts(self) -> None:
         """Validate `adaptation`, `Gamma`, `gamma` and `phi_hat0` (physically consistent for the natural law)."""
         Gamma, gamma = adaptation_gains(self.adaptation, self.Gamma, self.gamma, self.model.param_names)
@@ -225,7 +246,7 @@ class EstimateState:
         estimate(self)
         self.geometry.initial_state(self.phi_hat0)
 
-    @cached_property
+    @derived
     def geometry(self) -> Euclidean | Natural:
         return geometry(self.adaptation, self.Gamma, self.gamma, self.model.param_names)
 
@@ -240,7 +261,7 @@ class EstimateState:
         return self.geometry.estimate(x)
 
     def step(self, x: Array, dx: Array, h: Any) -> Array:
-        """x after a control period h along dx/dt (HasStep): the exponential map of the natural law."""
+        """x after a control period h along dx/dt: the exponential map of the natural law (x + h·dx for Γ)."""
         return self.geometry.step(x, dx, h)
 
 

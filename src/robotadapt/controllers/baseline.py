@@ -10,11 +10,11 @@ import numpy as np
 from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from .base import Array, errors, estimate, gains
+from .base import Array, Law, errors, estimate, gains
 
 
 @dataclass(frozen=True, eq=False)
-class _Fixed:
+class _Fixed(Law):
     """Shared parts of controllers whose estimate φ̂ is a constant (no state)."""
 
     model: RobotModel

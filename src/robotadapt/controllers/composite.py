@@ -11,12 +11,12 @@ import numpy as np
 from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from ..validation import ConfigError, as_gain, as_scalar
-from .base import Array, errors, estimate, freeze, gains, slotine_li_products, slotine_li_regressor
+from ..validation import ConfigError, as_gain, as_scalar, scalar_gain
+from .base import Array, Law, errors, estimate, freeze, gains, slotine_li_products, slotine_li_regressor
 
 
 @dataclass(frozen=True, eq=False)
-class Composite:
+class Composite(Law):
     """Composite adaptive control (Table 6.6.1): the Slotine–Li torque with a least-squares update driven by both the
     tracking error r and the prediction error of the filtered torque.
 
@@ -56,8 +56,8 @@ class Composite:
         gains(self, ("Lam", "Kv"), self.model.n)
         estimate(self)
         P0 = as_gain(self.P0, self.model.p, "controller.P0")
-        freeze(self, a=as_scalar(self.a, "controller.a", positive=True), P0=P0,
-               forgetting=as_scalar(self.forgetting, "controller.forgetting", nonnegative=True))
+        freeze(self, a=scalar_gain(self.a, "controller.a"), P0=P0,
+               forgetting=scalar_gain(self.forgetting, "controller.forgetting", nonnegative=True))
         if self.k0 is not None:
             k0 = as_scalar(self.k0, "controller.k0", positive=True)
             if self.forgetting == 0.0:
@@ -157,3 +157,7 @@ class Composite:
         (without forgetting, P⁻¹(t) = P0⁻¹ + ∫ W_fᵀ W_f, (6.6.25))."""
         xp = array_namespace(x)
         return 1.0 / xp.linalg.eigvalsh(self._split(x)[1])[..., -1]
+
+    def monitors(self, x: Array) -> dict[str, Array]:
+        """`lambda_min_P_inv` (:meth:`lambda_min_P_inv`) at the logged states."""
+        return {"lambda_min_P_inv": self.lambda_min_P_inv(x)}

@@ -1,9 +1,9 @@
 """Adaptive computed-torque controller of Craig, Hsu & Sastry (docs/laws.md#adaptive-computed-torque, Table 6.2.1).
 
 The update law needs the measured joint acceleration q̈ and the inverse of the estimated mass matrix M̂(q), so the
-controller implements :class:`~robotadapt.controllers.base.NeedsAcceleration` (the simulator hands it the plant's q̈
+controller sets :attr:`~robotadapt.controllers.base.Law.needs_acceleration` (the simulator hands it the plant's q̈
 for the torque it just applied; the torque itself does not need q̈). Where M̂ loses definiteness the update is NaN and
-the loop, which reads the law's guard (:class:`~robotadapt.controllers.base.HasGuard`), stops the run there. An optional box
+the loop, which reads the law's guard (:meth:`~robotadapt.controllers.base.Law.guard`), stops the run there. An optional box
 projection of φ̂ keeps M̂ invertible (docs/laws.md#adaptive-computed-torque "Projection"). The equations are written
 against the array API of their
 inputs, so numpy and JAX run the same code.
@@ -11,13 +11,13 @@ inputs, so numpy and JAX run the same code.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import cached_property
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 
 from ..arrays import array_namespace, matvec, quad, solve
+from ..pytree import derived
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_vector
@@ -62,6 +62,8 @@ class AdaptiveComputedTorque(EstimateState):
         (det M̂ = m̂2 l1² l2² (m̂1 + m̂2 s2²)) and the polar arm (M̂ = diag(m̂ r², m̂), r ≠ 0).
     """
 
+    needs_acceleration: ClassVar[bool] = True  # the update reads the measured q̈ (6.2.19)
+
     model: RobotModel
     Kp: Any
     Kv: Any
@@ -73,7 +75,7 @@ class AdaptiveComputedTorque(EstimateState):
     phi_max: Any = None
     adaptation: str = "euclidean"
     gamma: Any = None
-    book_pair: ClassVar[bool]  # per instance, not a field: set by __post_init__ (a copy keeps it)
+    book_pair: bool = field(init=False, default=False)  # (6.2.16)'s pair in the book's closed form (__post_init__)
 
     def __post_init__(self) -> None:
         n, p = self.model.n, self.model.p
@@ -95,7 +97,7 @@ class AdaptiveComputedTorque(EstimateState):
         # evaluated now so that bad input fails at construction.
         _ = self.lyapunov_pair, self.bounds
 
-    @cached_property
+    @derived
     def lyapunov_pair(self) -> tuple[Array, Array]:
         """(P, Q) with AᵀP + PA = −Q, both symmetric positive definite (6.2.16): written with the namespace of the gains,
         so that a traced K_p, K_v or Q (tuning, :mod:`robotadapt.studies.gain_space`) gives a traced P; the checks run
@@ -125,7 +127,7 @@ class AdaptiveComputedTorque(EstimateState):
                       "precision (badly scaled Kp, Kv?)")
         return P, Q
 
-    @cached_property
+    @derived
     def bounds(self) -> tuple[Array, Array]:
         """(lower, upper) ends of the box for φ̂, −∞ / +∞ where not given."""
         p = self.model.p
@@ -137,10 +139,7 @@ class AdaptiveComputedTorque(EstimateState):
             raise ConfigError("controller.phi_hat0", f"must lie in the box [phi_min, phi_max] = [{lo}, {hi}]")
         return lo, hi
 
-    #: the cached constants computed from K_p, K_v, Q by traceable arithmetic (a tuned gain recomputes them)
-    derived: ClassVar[tuple[str, ...]] = ("lyapunov_pair", "_BtP", "geometry")
-
-    @cached_property
+    @derived
     def _BtP(self) -> Array:
         """Bᵀ P = [P12ᵀ, P22], shape (n, 2n)."""
         return self.lyapunov_pair[0][self.model.n :, :]
@@ -165,7 +164,7 @@ class AdaptiveComputedTorque(EstimateState):
         return matvec(self.model.regressor(q, dq, dq, ref.ddq_des + de @ self.Kv.T + e @ self.Kp.T), self.phi_hat(x))
 
     def guard(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
-        """M̂(q) positive definite, per run: what the update (6.2.19) needs (HasGuard)."""
+        """M̂(q) positive definite, per run: what the update (6.2.19) needs (the law's guard)."""
         return positive_definite(array_namespace(x, q), self.model.mass_matrix(q, self.phi_hat(x)))
 
     def update(self, t: Array, x: Array, q: Array, dq: Array, ddq: Array, ref: Reference) -> Array:
@@ -184,7 +183,7 @@ class AdaptiveComputedTorque(EstimateState):
         return xp.where(ok[..., None], dx, xp.nan)
 
     def stop_reason(self, q: Array, x: Array) -> str:
-        """Why a run stops at a state whose M̂(q) is not positive definite (HasGuard)."""
+        """Why a run stops at a state whose M̂(q) is not positive definite (the law's guard)."""
         phi_hat = self.phi_hat(np.asarray(x))
         return _not_pd(self.model.mass_matrix(np.asarray(q), phi_hat), phi_hat)
 

@@ -8,16 +8,18 @@ from typing import Any
 import numpy as np
 
 from ..arrays import array_namespace, matvec
+from ..grid import steps
+from ..pytree import Module
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from ..validation import ConfigError, as_scalar
+from ..validation import ConfigError, scalar_gain
 from .base import Array, EstimateState, errors
 
 _MAX_TABLE_BYTES = 2e9
 
 
 @dataclass(frozen=True, eq=False)
-class DesiredRegressorTable:
+class DesiredRegressorTable(Module):
     """Y_d sampled on the half-step grid t = k·h of a fixed-step run (h = dt/2, what RK4's stages visit)."""
 
     h: float
@@ -64,7 +66,7 @@ class DCAL(EstimateState):
 
     def __post_init__(self) -> None:
         for name in ("Kv", "Kp", "Ka"):
-            object.__setattr__(self, name, as_scalar(getattr(self, name), f"controller.{name}", positive=True))
+            object.__setattr__(self, name, scalar_gain(getattr(self, name), f"controller.{name}"))
         if not isinstance(self.precompute, bool):
             raise ConfigError("controller.precompute", f"expected true or false, got {self.precompute!r}")
         self.adapts()
@@ -73,7 +75,7 @@ class DCAL(EstimateState):
         """With `precompute`, tabulate Y_d at every RK4 stage instant of the run (half steps up to t_final)."""
         if not self.precompute:
             return self
-        n_half = 2 * int(np.ceil(t_final / dt - 1e-9)) + 1
+        n_half = 2 * steps(t_final, dt) + 1
         nbytes = 8.0 * n_half * self.model.n * self.model.p
         if nbytes > _MAX_TABLE_BYTES:
             raise ConfigError("controller.precompute", f"the Y_d table would take {nbytes / 1e9:.1f} GB; "

@@ -17,14 +17,14 @@ A geometry turns b into the law's state derivative and holds the parameter term 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
 import numpy as np
 
 from ..arrays import array_namespace, expm, matvec, quad
+from ..pytree import Module, derived
 from ..robots.consistency import DUAL, Part, link_parameters, parts, pseudo_inertia, unformed
-from ..validation import ConfigError, as_gain, as_scalar
+from ..validation import ConfigError, as_gain, scalar_gain
 
 Array = Any
 ADAPTATIONS = ("euclidean", "natural", "none")
@@ -36,18 +36,14 @@ _LOWER_HALF = np.tril(np.ones((4, 4)), -1) + 0.5 * np.eye(4)  # Φ(S): the part 
 
 
 @dataclass(frozen=True, eq=False)
-class Euclidean:
+class Euclidean(Module):
     """The book's update dφ̂/dt = Γ b with state x = φ̂; V_φ = ½ φ̃ᵀ Γ⁻¹ φ̃ (6.3.7)."""
 
     Gamma: Array
 
-    def __post_init__(self) -> None:
-        if self.Gamma is not None:  # now, not at the first Lyapunov value: a run leaves the law's skeleton as it was
-            _ = self._Gamma_inv
-
-    @cached_property
+    @derived
     def _Gamma_inv(self) -> Array:
-        return array_namespace(self.Gamma).linalg.inv(self.Gamma)
+        return None if self.Gamma is None else array_namespace(self.Gamma).linalg.inv(self.Gamma)  # Frozen: none
 
     def state_names(self, param_names: tuple[str, ...]) -> tuple[str, ...]:
         return tuple(f"{name}_hat" for name in param_names)
@@ -83,17 +79,14 @@ class Frozen(Euclidean):
 
 
 @dataclass(frozen=True, eq=False)
-class Natural:
+class Natural(Module):
     """The natural adaptive law (Lee, Kwon & Park 2018) with gain γ on the parts of φ (`layout`, every parameter in
     one part), in log-Cholesky coordinates (module docstring; the derivation in docs/natural.md)."""
 
     gamma: Any
     layout: tuple[Part, ...]
 
-    def __post_init__(self) -> None:
-        _ = self._order  # now: a run leaves the law's skeleton as it was
-
-    @cached_property
+    @derived
     def _order(self) -> tuple[Array, Array, Array]:
         """(entries of the links `(L, 10)`, entries of the scalars `(S,)`, the permutation that puts [links, scalars]
         back in φ's order)."""
@@ -217,7 +210,7 @@ def adaptation_gains(adaptation: Any, Gamma: Any, gamma: Any, param_names: tuple
         raise ConfigError("controller.adaptation", f"\"natural\" needs every parameter to be a link's 10 inertial "
                           f"parameters or a positive scalar (mass, rotor inertia, friction); {', '.join(missing[:3])} "
                           "has no such form: use adaptation = \"euclidean\" (e.g. for base parameters)")
-    return None, as_scalar(gamma, "controller.gamma", positive=True)
+    return None, scalar_gain(gamma, "controller.gamma")
 
 
 def geometry(adaptation: str, Gamma: Any, gamma: Any, param_names: tuple[str, ...]) -> Euclidean | Natural:

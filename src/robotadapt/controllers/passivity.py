@@ -24,11 +24,12 @@ from typing import Any
 import numpy as np
 
 from ..arrays import array_namespace, matvec
+from ..pytree import Module
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_array, as_gain
 from .adaptation import UpdateLaw
-from .base import Array, errors, estimate, freeze, gains
+from .base import Array, Law, errors, estimate, freeze, gains
 
 _SERVO = "controller.servo"
 
@@ -43,7 +44,7 @@ def _matrix(value: Any, shape: tuple[int, int], field: str) -> Array:
     return arr
 
 
-class Servo:
+class Servo(Module):
     """A servo filter G(s) = K(s)/s = D + C (sI − A)⁻¹ B of the passivity-based class (6.4.2), by its matrices: D n×n,
     A m×m, B m×n, C n×m, with m ≥ 0 filter states ξ (m = 0: G(s) = D is static). :class:`ServoFilter` holds them;
     :class:`PdServo` and :class:`PidServo` hold their gains, fix A and B by n and read D (and C) off the gains, so a
@@ -161,7 +162,7 @@ def state_space_servo(n: int, D: Any, A: Any, B: Any, C: Any) -> ServoFilter:
 
 
 @dataclass(frozen=True, eq=False)
-class PassivityBased:
+class PassivityBased(Law):
     """Adaptive passivity-based controller, Table 6.4.1, with servo filter `servo` and update law `law`.
 
     r = ė + w,  w = G(s) e                                                   (6.4.1)

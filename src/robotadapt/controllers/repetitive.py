@@ -8,17 +8,18 @@ from typing import Any
 import numpy as np
 
 from ..arrays import array_namespace, matvec, quad
+from ..pytree import Module
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from ..validation import ConfigError, as_scalar, as_vector
-from .base import Array, errors
+from ..validation import ConfigError, as_scalar, as_vector, scalar_gain
+from .base import Array, Law, errors
 
 _MAX_TABLE_BYTES = 2.5e8  # beyond this, Y_d over one period is evaluated on line, not tabulated
 _CHUNK = 4096  # instants per vectorized regressor call while tabulating
 
 
 @dataclass(frozen=True, eq=False)
-class PeriodicRegressorTable:
+class PeriodicRegressorTable(Module):
     """Y_d = Y(q_d, q̇_d, q̇_d, q̈_d) (7.2.4) over one period on the half-step grid t = i·h, i = 0 … 2N − 1 (h = T/2N =
     dt/2, what RK4's stages visit); T-periodic (7.2.30), so read at t mod T for every t of the run."""
 
@@ -44,7 +45,7 @@ class PeriodicRegressorTable:
 
 
 @dataclass(frozen=True, eq=False)
-class Repetitive:
+class Repetitive(Law):
     """Repetitive control law (Table 7.2.2) for a T-periodic desired trajectory:
 
     r = ė + e,   τ = û_d(t) + k_v r + k_p e + k_a ‖e‖² r                                     (7.2.31)
@@ -103,7 +104,7 @@ class Repetitive:
 
     def __post_init__(self) -> None:
         for name in ("Kv", "Kp", "Ka", "kL"):
-            object.__setattr__(self, name, as_scalar(getattr(self, name), f"controller.{name}", positive=True))
+            object.__setattr__(self, name, scalar_gain(getattr(self, name), f"controller.{name}"))
         if self.period is not None:
             object.__setattr__(self, "period", as_scalar(self.period, "controller.period", positive=True))
         if (self.u_min is None) != (self.u_max is None):

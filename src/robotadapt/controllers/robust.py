@@ -18,11 +18,11 @@ from ..arrays import array_namespace
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_scalar, as_vector
-from .base import Array, Controller, FiltersTorque, HasFilteredError, NeedsAcceleration, Prepares, freeze
+from .base import Array, Law, freeze
 
 
 @dataclass(frozen=True, eq=False)
-class SignRobust:
+class SignRobust(Law):
     """An adaptive controller `base` with a filtered error r, plus the disturbance-rejecting switching term:
 
     τ = τ_a + k_d sgn(r),  sgn(r) = [sgn(r_1), …, sgn(r_n)]ᵀ,  sgn(0) = 0           (6.7.6), (6.7.7)
@@ -41,10 +41,9 @@ class SignRobust:
     V̇ ≤ −rᵀK_v r + ε Σ_i sup|T_d,i|² / (4 k_d,i), and only a residual set is guaranteed (the time average of ‖r‖²
     is O(ε); in practice |r_i| ≲ ε): e no longer goes exactly to zero.
 
-    Everything else is the base's: the state x, φ̂, the filtered error, and whatever optional part of the contract
-    (:mod:`robotadapt.controllers.base`) the base has — the Lyapunov function, the regressor (for the passivity integral
-    (6.4.4)), the φ̂ the torque uses (Landau's PI law, (6.4.20)), a projection, tables prepared ahead of the run — exists
-    on the wrapper exactly when the base has it.
+    Everything else is the base's, forwarded hook by hook (:class:`~robotadapt.controllers.base.Law`): the state x,
+    φ̂, the filtered error, the Lyapunov function, the regressor (for the passivity integral (6.4.4)), the φ̂ the torque
+    uses (Landau's PI law, (6.4.20)), a projection, tables prepared ahead of the run.
     """
 
     #: constants tuning leaves alone, with why (robotadapt.studies.gain_space.locate)
@@ -58,12 +57,12 @@ class SignRobust:
 
     def __post_init__(self) -> None:
         base = self.base
-        if isinstance(base, NeedsAcceleration):
-            raise ConfigError("controller.base", f"{type(base).__name__} needs the measured acceleration; the sign term "
-                              "(6.7.6) wraps laws whose torque and update are one map, such as slotine_li")
-        if not (isinstance(base, Controller) and isinstance(base, HasFilteredError)):
+        if not isinstance(base, Law) or not base.has("filtered_error"):  # an argument check: what it wraps
             raise ConfigError("controller.base", "expected an adaptive controller with a filtered error r (such as "
                               f"slotine_li), got {type(base).__name__}")
+        if base.needs_acceleration:
+            raise ConfigError("controller.base", f"{type(base).__name__} needs the measured acceleration; the sign term "
+                              "(6.7.6) wraps laws whose torque and update are one map, such as slotine_li")
         if base.model is not self.model and (base.model.n, base.model.param_names) != (self.model.n,
                                                                                         self.model.param_names):
             raise ConfigError("controller.base", f"the base's model ({base.model.n} joints, parameters "
@@ -75,15 +74,58 @@ class SignRobust:
         freeze(self, kd=kd, boundary_layer=as_scalar(self.boundary_layer, "controller.boundary_layer",
                                                      nonnegative=True))
 
-    def __getattr__(self, name: str) -> Any:
-        """The base's public attributes, so that the simulator's protocol checks see the wrapper as having an optional
-        part exactly when the base does; `prepare` returns the wrapper around the prepared base."""
-        base = self.__dict__.get("base")
-        if base is None or name.startswith("_"):
-            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
-        if name == "prepare" and isinstance(base, Prepares):
-            return lambda trajectory, dt, t_final: replace(self, base=base.prepare(trajectory, dt, t_final))
-        return getattr(base, name)
+    # Everything but the torque is the base's, forwarded hook by hook (robotadapt.controllers.base.Law).
+    def has(self, hook: str) -> bool:
+        return self.base.has(hook)
+
+    @property
+    def records(self) -> int:
+        return self.base.records
+
+    def prepare(self, trajectory: Any, dt: float, t_final: float) -> SignRobust:
+        """The wrapper around the prepared base."""
+        base = self.base.prepare(trajectory, dt, t_final)
+        return self if base is self.base else replace(self, base=base)
+
+    def guard(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array | None:
+        return self.base.guard(t, x, q, dq, ref)
+
+    def stop_reason(self, q: Array, x: Array) -> str:
+        return self.base.stop_reason(q, x)
+
+    def project(self, x: Array) -> Array:
+        return self.base.project(x)
+
+    def applied(self, dx: Array, tau: Array, u: Array) -> Array:
+        return self.base.applied(dx, tau, u)
+
+    def delay_line(self, dt: float, q0: Array, dq0: Array) -> Array | None:
+        return self.base.delay_line(dt, q0, dq0)
+
+    def sample(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, past: Array) -> tuple[Array, Array]:
+        return self.base.sample(t, x, q, dq, ref, past)
+
+    def step(self, x: Array, dx: Array, h: Any) -> Array:
+        return self.base.step(x, dx, h)
+
+    def regressor(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array] | None:
+        return self.base.regressor(t, x, q, dq, ref)
+
+    def regressor_products(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference,
+                           phi: Array) -> tuple[Array, Array, Array]:
+        return self.base.regressor_products(t, x, q, dq, ref, phi)
+
+    def lyapunov(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference, phi: Array) -> Array | None:
+        return self.base.lyapunov(t, x, q, dq, ref, phi)
+
+    def phi_hat_at(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
+        return self.base.phi_hat_at(t, x, q, dq, ref)
+
+    def passivity_caveat(self) -> str | None:
+        return self.base.passivity_caveat()
+
+    def monitors(self, x: Array) -> dict[str, Array]:
+        return self.base.monitors(x)
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -114,9 +156,7 @@ class SignRobust:
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         tau_a, dx = self.base(t, x, q, dq, ref)
         tau = tau_a + self.kd * self.switching(self.filtered_error(t, x, q, dq, ref))
-        if isinstance(self.base, FiltersTorque):  # a composite base filters the torque applied, sign term included
-            dx = self.base.applied(dx, tau_a, tau)
-        return tau, dx
+        return tau, self.base.applied(dx, tau_a, tau)  # a composite base filters the torque applied, sign term included
 
 
 @dataclass(frozen=True, eq=False)

@@ -162,7 +162,7 @@ def remember(key: str, program: Compiled, extra: Any) -> None:
 
 def compiled(fn: Callable[..., Any], *examples: Any) -> Compiled:
     """`fn` traced by JAX on arrays like `examples` and compiled to native code (float64)."""
-    from ..sim.compiled import float64, jax_module
+    from ..tracing import float64, jax_module
 
     @float64
     def trace() -> Any:

@@ -10,7 +10,7 @@ Given the two traced programs of a controller — `init(q, q̇) -> state` and `t
 
 the semantics of `RealtimeController.reset` / `.step`: reset starts at the measured state with k = 0, each step returns
 τ_k at (t, q, q̇) and advances the state to tick k + 1 in place. No allocation, no global state but the constant tables
-(and the static scratch arrays of large temporaries, :data:`robotadapt.native.c99.STACK_LIMIT`: one caller at a time),
+(and the static scratch arrays of large temporaries, :data:`robotadapt.native.emitter.STACK_LIMIT`: one caller at a time),
 libm only. :func:`harness` is an example program: it reads lines `t q1…qn dq1…dqn` and prints τ per line.
 """
 

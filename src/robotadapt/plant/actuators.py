@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from ..arrays import array_namespace
+from ..pytree import Module
 from ..validation import ConfigError, as_vector
 
 Array = Any
@@ -39,7 +40,7 @@ def _positive(value: Any, n: int, field: str) -> Array:
 
 
 @dataclass(frozen=True, eq=False)
-class Actuator:
+class Actuator(Module):
     """Torque limit L (N m, per joint or one for all), rate limit R (N m/s) and a computational delay of
     `delay_samples` control periods (module docstring). None: no limit."""
 
@@ -98,7 +99,7 @@ class Actuator:
 
 
 @dataclass(frozen=True, eq=False)
-class DCMotor:
+class DCMotor(Module):
     """A permanent-magnet DC motor per joint behind a current loop (module docstring). SI units: R (Ω), L (H), k_t
     (N m/A), k_b (V s/rad), gear_ratio N (motor turns per joint turn, > 0), rotor_inertia J_m (kg m², motor side),
     current_gain K_c (V/A, 0: voltage drive), voltage_limit (V, None: none). The plant's state gains the currents i."""

@@ -19,6 +19,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..arrays import array_namespace, matvec, repeat, rk4, solve
+from ..pytree import Module
 from ..robots.base import RobotModel
 from ..validation import ConfigError, as_scalar, as_vector
 from .actuators import Actuator, DCMotor
@@ -30,7 +31,7 @@ Disturbance = Callable[[Array, Array, Array], Array]
 
 
 @dataclass(frozen=True, eq=False)
-class SinusoidalDisturbance:
+class SinusoidalDisturbance(Module):
     """T_d,i(t) = A_i sin(ω t + φ_i) + b_i (Example 6.7.1 uses A = 2, ω = 10 rad/s on both joints)."""
 
     amplitude: Array
@@ -58,7 +59,7 @@ def sinusoidal_disturbance(n: int, amplitude: Any = 0.0, omega: Any = 1.0, phase
 
 
 @dataclass(frozen=True, eq=False)
-class Plant:
+class Plant(Module):
     """`model` with the true parameters `phi` and an optional disturbance `T_d(t, q, q̇)` (torques, shape `(..., n)`);
     optionally a `payload` (φ in `model`'s parameterization changes when it is attached), `elastic_joint`s, a `motor`
     per joint, an `actuator` (limits, delay) and a `sensor` (the measurement path, sampled-data mode only)."""

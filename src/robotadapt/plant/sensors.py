@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from ..arrays import array_namespace
+from ..pytree import Module, host
 from ..validation import ConfigError, as_scalar, as_vector
 
 Array = Any
@@ -37,7 +38,7 @@ State = tuple[Array, Array, Array, Array]  # (q_m,k−1, v_k−1, q̇_m,k−1, k
 
 
 @dataclass(frozen=True, eq=False)
-class Sensor:
+class Sensor(Module):
     """Encoder resolution, velocity estimate, noise and its seed (module docstring); None: that effect is absent."""
 
     n: int
@@ -46,7 +47,7 @@ class Sensor:
     velocity_cutoff: Any = None
     noise_q: Any = None
     noise_dq: Any = None
-    seed: int = 0
+    seed: int = host(0)  # read by the feed on the host only: runs that differ in it share one program
 
     def __post_init__(self) -> None:
         for name in ("encoder_resolution", "noise_q", "noise_dq"):

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from ..pytree import Module
 from ..robots.base import RobotModel
 from ..validation import ConfigError, as_scalar, as_vector
 
@@ -33,7 +34,7 @@ _INERTIA = ("Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 
 
 @dataclass(frozen=True, eq=False)
-class Payload:
+class Payload(Module):
     """A point mass `mass` (kg) at `offset` (m, 3 numbers in the last link's frame), attached at `time` (s)."""
 
     mass: float
@@ -68,7 +69,7 @@ class Payload:
 
 
 @dataclass(frozen=True, eq=False)
-class ElasticJoint:
+class ElasticJoint(Module):
     """Per joint: motor-side inertia `J` (kg m², reflected to the link side), stiffness `K` (N m/rad), damping `D`
     (N m s/rad). The plant's state gains θ and θ̇ (n each)."""
 

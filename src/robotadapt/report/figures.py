@@ -5,8 +5,10 @@ Axes carry units: rad or m per joint type (revolute or prismatic), N·m or N for
 the unit its name implies (kg for masses, kg·m for first moments, kg·m² for inertias, N·m·s/rad or N·s/m for viscous
 friction, N·m or N for Coulomb friction). The joint types come from the model (:func:`joint_types`); without a model
 the axes say "rad or m". Symbols are matplotlib mathtext ($e_1$, $\\hat\\varphi$). Each `*_figure` function returns the
-matplotlib Figure (to inspect or save elsewhere); the functions without the suffix write it (PNG unless their `output`,
-a :class:`~robotadapt.report.output.FigureFormat`, says otherwise) and close it.
+matplotlib Figure (to inspect or save elsewhere: `fig.savefig`; in a notebook, display it), made without pyplot, so
+that drawing leaves the user's backend and pyplot figures alone (:func:`~robotadapt.report.output.new_figure`); the
+functions without the suffix write it (PNG unless their `output`, a :class:`~robotadapt.report.output.FigureFormat`,
+says otherwise) and close it.
 """
 
 from __future__ import annotations
@@ -18,14 +20,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ..files import writable_dir  # noqa: E402
-from ..studies.compare import number_text  # noqa: E402
-from .output import DEFAULT_DPI, PNG, FigureFormat, save_figure  # noqa: E402
+from ..files import writable_dir
+from ..studies.compare import number_text
+from .output import DEFAULT_DPI, PNG, FigureFormat, new_figure, save_figure
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -140,7 +139,7 @@ def norm_unit(table: dict[str, str], joints: str | None) -> str:
 def style(i: int) -> dict[str, Any]:
     """The i-th line's colour (qualitative tab10), dash and hollow marker: (colour, dash) pairs are unique for i < 20,
     neighbours differ in all three, and the markers of curves that coincide sit at different places."""
-    return {"color": plt.get_cmap("tab10")(i % 10), "linestyle": DASHES[i % len(DASHES)],
+    return {"color": matplotlib.colormaps["tab10"](i % 10), "linestyle": DASHES[i % len(DASHES)],
             "marker": MARKERS[i % len(MARKERS)], "markevery": (0.023 * (i % 5), 0.12), "markersize": 4.5,
             "markerfacecolor": "none"}
 
@@ -159,7 +158,8 @@ def _panels(k: int, height: float = 2.6) -> tuple[Figure, list[Any]]:
     """k stacked panels sharing time, laid out at the dpi they are written at (matplotlib parses each mathtext label
     once per dpi: laid out at another, every label is parsed twice, a third of a fresh `robotadapt run`'s figure
     time)."""
-    fig, axes = plt.subplots(k, 1, figsize=(7, 1.4 + height * k), sharex=True, squeeze=False, dpi=DEFAULT_DPI)
+    fig = new_figure(figsize=(7, 1.4 + height * k), dpi=DEFAULT_DPI)
+    axes = fig.subplots(k, 1, sharex=True, squeeze=False)
     return fig, list(axes[:, 0])
 
 
@@ -351,7 +351,8 @@ def study_figure(key: str, runs: list[Any], title: str = "", model: Any = None) 
     """Overlay of a one-at-a-time study: ‖e(t)‖ and ‖φ̃(t)‖ (or ‖φ̂(t)‖ when the truth is unknown), one line per
     value; log axes that start at the first nonzero value."""
     joints = joint_types(model) if model is not None else None
-    fig, (ax_e, ax_p) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    fig = new_figure(figsize=(7, 6))
+    ax_e, ax_p = fig.subplots(2, 1, sharex=True)
     known = bool(runs) and runs[0].result.phi is not None
     for i, run in enumerate(runs):
         res = run.result
@@ -375,7 +376,7 @@ def study_style(runs: list[Any], i: int) -> dict[str, Any]:
     line = style(i)
     if len(values) > 1 and all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
         rank = int(np.argsort(np.argsort(values, kind="stable"))[i])
-        line["color"] = plt.get_cmap("viridis")(0.9 * rank / (len(values) - 1))
+        line["color"] = matplotlib.colormaps["viridis"](0.9 * rank / (len(values) - 1))
     return line
 
 

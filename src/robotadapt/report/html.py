@@ -19,20 +19,16 @@ from functools import partial
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ..analysis.excitation import Excitation  # noqa: E402
-from ..analysis.metrics import metrics  # noqa: E402
-from ..files import atomic_write, writable_dir  # noqa: E402
-from ..studies.compare import Row, flat, number_text  # noqa: E402
-from ..studies.scenarios import Scenario, book_scenarios, load  # noqa: E402
-from .figures import EFFORT, POSITION, RUN_FIGURES, joint_types, norm_unit, positive, save_figures, style  # noqa: E402
-from .files import save_result  # noqa: E402
-from .output import PNG, FigureFormat, render, save_figure  # noqa: E402
+from ..analysis.excitation import Excitation
+from ..analysis.metrics import metrics
+from ..files import atomic_write, writable_dir
+from ..studies.compare import Row, flat, number_text
+from ..studies.scenarios import Scenario, book_scenarios, load
+from .figures import EFFORT, POSITION, RUN_FIGURES, joint_types, norm_unit, positive, save_figures, style
+from .files import save_result
+from .output import PNG, FigureFormat, new_figure, render, save_figure
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -109,7 +105,8 @@ def _power_of_ten(x: float) -> str:
 def excitation_plot(exc: Excitation, title: str = "") -> Figure:
     """The figure of :func:`excitation_figure`, returned open."""
     floor = 1e-12 * max(exc.beta_max, 1e-300)
-    fig, (ax_w, ax_c) = plt.subplots(2, 1, figsize=(7, 6.5))
+    fig = new_figure(figsize=(7, 6.5))
+    ax_w, ax_c = fig.subplots(2, 1)
     _pair(ax_w, exc.t0, exc.beta, exc.alpha, floor, (r"$\beta(t_0) = \lambda_{\max}$", r"$\alpha(t_0) = \lambda_{\min}$"),
           len(exc.param_names))
     ax_w.axhline(exc.rtol * exc.beta_max, color="k", linestyle=":",
@@ -293,8 +290,8 @@ def overlay_figure(rows: list[Row], signal: str) -> Figure:
     panels = _families(rows)
     cols = 2 if len(panels) > 1 else 1
     nrows = -(-len(panels) // cols)
-    fig, axes = plt.subplots(nrows, cols, figsize=(6.2 * cols, 1.2 + 3.2 * nrows), sharex=True, sharey=True,
-                             squeeze=False)
+    fig = new_figure(figsize=(6.2 * cols, 1.2 + 3.2 * nrows))
+    axes = fig.subplots(nrows, cols, sharex=True, sharey=True, squeeze=False)
     joints = joint_types(rows[0].entry.scenario.setup.controller.model) if rows else None
     norms = [_signal(r, signal) for r in rows]
     ref = _reference(rows)
@@ -336,8 +333,8 @@ def laws_figure(rows: list[Row], max_torque: float | None = None) -> Figure:
     the title gives RMS ‖e‖ and the peak torque."""
     cols = min(4, max(len(rows), 1))
     nrows = -(-len(rows) // cols)
-    fig, axes = plt.subplots(nrows, cols, figsize=(3.6 * cols, 0.8 + 2.4 * nrows), sharex=True, sharey=True,
-                             squeeze=False)
+    fig = new_figure(figsize=(3.6 * cols, 0.8 + 2.4 * nrows))
+    axes = fig.subplots(nrows, cols, sharex=True, sharey=True, squeeze=False)
     norms = [np.linalg.norm(r.result.e, axis=-1) for r in rows]
     finite = np.concatenate([y[np.isfinite(y) & (y > 0)] for y in norms] or [np.ones(1)])
     top = float(finite.max()) if finite.size else 1.0

@@ -6,19 +6,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import matplotlib
 import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-from ..analysis.identification import Identification  # noqa: E402
-from ..robots.base import RobotModel  # noqa: E402
-from ..robots.identifiability import base_parameters  # noqa: E402
-from ..studies.excite import Excitation, stacked_regressor  # noqa: E402
-from ..trajectories import Trajectory  # noqa: E402
-from .output import PNG, FigureFormat, save_figure  # noqa: E402
+from ..analysis.identification import Identification
+from ..robots.base import RobotModel
+from ..robots.identifiability import base_parameters
+from ..studies.excite import Excitation, stacked_regressor
+from ..trajectories import Trajectory
+from .output import PNG, FigureFormat, new_figure, save_figure
 
 STYLES = {"consistent": "-", "wls": "--", "ols": ":", "prior": "-."}
 
@@ -28,7 +24,8 @@ def holdout_plot(result: Identification, title: str = "") -> Figure:
     n = result.holdout_tau.shape[1]
     cols = 2 if n > 3 else 1
     rows = -(-n // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(7 * cols, 1.9 * rows + 0.8), sharex=True, squeeze=False)
+    fig = new_figure(figsize=(7 * cols, 1.9 * rows + 0.8))
+    axes = fig.subplots(rows, cols, sharex=True, squeeze=False)
     rms = result.holdout_rms
     for i, ax in enumerate(axes.flat):
         if i >= n:
@@ -69,7 +66,8 @@ def excitation_plot(model: RobotModel, result: Excitation, old: Trajectory, comp
         bound = limits.bound(kind)
         bounded = bool(np.all(np.isfinite(bound)))
         rows.append((kind, value / bound if bounded else value, f"${symbol}$" + (" / bound" if bounded else "")))
-    fig, axes = plt.subplots(len(rows) + 1, 1, figsize=(8, 1.9 * len(rows) + 2.6))
+    fig = new_figure(figsize=(8, 1.9 * len(rows) + 2.6))
+    axes = fig.subplots(len(rows) + 1, 1)
     for ax, (kind, value, label) in zip(axes, rows, strict=False):
         for i in range(value.shape[1]):
             ax.plot(fine.t, value[:, i], linewidth=1.0, label=f"joint {i + 1}")

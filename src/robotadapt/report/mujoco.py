@@ -12,8 +12,8 @@ import numpy as np
 from ..plant.mujoco import MujocoPlant, option_columns
 from ..robots.base import RobotModel
 from ..sim.result import SimulationResult
-from .figures import plt, style
-from .output import PNG, FigureFormat, save_figure
+from .figures import style
+from .output import PNG, FigureFormat, new_figure, save_figure
 
 UNITS = {"armature": ("rotor inertia $I_a$", "kg·m²"), "damping": ("viscous friction $f_v$", "N·m·s/rad"),
          "frictionloss": ("dry friction $f_c$", "N·m")}
@@ -27,7 +27,8 @@ def option_estimates(result: SimulationResult, plant: MujocoPlant, model: RobotM
     columns = {name: index for name, index in option_columns(model).items() if np.any(index >= 0)}
     if not columns or result.phi_hat.shape[-1] != model.p:
         return None
-    fig, axes = plt.subplots(len(columns), 1, figsize=(7, 1.4 + 2.6 * len(columns)), sharex=True, squeeze=False)
+    fig = new_figure(figsize=(7, 1.4 + 2.6 * len(columns)))
+    axes = fig.subplots(len(columns), 1, sharex=True, squeeze=False)
     for ax, (name, index) in zip(axes[:, 0], columns.items(), strict=True):
         truth = getattr(mj_model, f"dof_{name}")[vadr]
         for joint in np.flatnonzero(index >= 0):

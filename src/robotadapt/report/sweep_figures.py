@@ -13,15 +13,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ..studies.compare import number_text  # noqa: E402
-from ..studies.sweep import scalar  # noqa: E402
-from .figures import parameter_unit, tex_name  # noqa: E402
-from .output import PNG, FigureFormat, save_figure  # noqa: E402
+from ..studies.compare import number_text
+from ..studies.sweep import scalar
+from .figures import parameter_unit, tex_name
+from .output import PNG, FigureFormat, new_figure, save_figure
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -142,7 +139,8 @@ def summary_plot(rows: list[dict[str, Any]], keys: list[str], metric: str, title
     """The figure of :func:`summary_figure`, returned open; `grid` the grid keys (default: the keys with at most
     `MAX_GRID_VALUES` distinct values shared by several runs), whose values colour the dots."""
     shown = panels(rows, keys)
-    fig, axes = plt.subplots(1, len(shown), figsize=(4.6 * len(shown), 4.0), squeeze=False)
+    fig = new_figure(figsize=(4.6 * len(shown), 4.0))
+    axes = fig.subplots(1, len(shown), squeeze=False)
     y = np.array([scalar(row.get(metric)) for row in rows])
     finished = np.array([row.get("status") == "ok" for row in rows])
     ok, undefined = finished & np.isfinite(y), finished & ~np.isfinite(y)
@@ -156,7 +154,7 @@ def summary_plot(rows: list[dict[str, Any]], keys: list[str], metric: str, title
         for c, text in enumerate(texts):
             sel = ok & (classes == c)
             if sel.any():
-                ax.plot(x[sel], y[sel], "o", markersize=4, alpha=alpha, color=plt.get_cmap("tab10")(c % 10),
+                ax.plot(x[sel], y[sel], "o", markersize=4, alpha=alpha, color=matplotlib.colormaps["tab10"](c % 10),
                         label=text)
         if undefined.any():
             ax.plot(x[undefined], np.full(undefined.sum(), top), "^", color="0.5",

@@ -7,16 +7,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import matplotlib.colors
 import matplotlib.ticker
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ..studies.tune import Surface, Tuned  # noqa: E402
-from .output import PNG, FigureFormat, save_figure  # noqa: E402
-from .sweep_figures import GAIN_SYMBOLS  # noqa: E402
+from ..studies.tune import Surface, Tuned
+from .output import PNG, FigureFormat, new_figure, save_figure
+from .sweep_figures import GAIN_SYMBOLS
 
 
 def gain_label(field: str) -> str:
@@ -30,7 +27,8 @@ def tune_figure(tuned: Tuned, path: Path, output: FigureFormat = PNG) -> None:
     and after (the nominal plant); the objective surface over two gains with the path, when the tuning computed one."""
     surface = tuned.surface
     panels = 4 if surface is not None else 3
-    fig, axes = plt.subplots(1, panels, figsize=(4.6 * panels, 4.0), layout="constrained")
+    fig = new_figure(figsize=(4.6 * panels, 4.0), layout="constrained")
+    axes = fig.subplots(1, panels)
     its = tuned.search.iterations
     ax = axes[0]
     ax.semilogy([it.objective for it in its], "o-", color="C0", label=tuned.objective.text)
@@ -70,7 +68,7 @@ def _surface(ax: Any, tuned: Tuned, surface: Surface) -> None:
     log = high > low > 0
     cs = ax.contourf(X, Y, Z, levels=np.geomspace(low, high, 20) if log else 20,
                      norm=matplotlib.colors.LogNorm(low, high) if log else None, cmap="viridis")
-    bar = plt.colorbar(cs, ax=ax, label=tuned.objective.text, format="%.3g")
+    bar = ax.figure.colorbar(cs, ax=ax, label=tuned.objective.text, format="%.3g")
     bar.ax.minorticks_off()
     if tuned.max_torque is not None:
         ax.contour(X, Y, surface.max_abs_torque, levels=[tuned.max_torque], colors="r", linewidths=1.2)

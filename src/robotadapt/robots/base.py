@@ -13,11 +13,12 @@ from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 from ..arrays import array_namespace, matvec, solve
+from ..pytree import Module
 
 Array = Any
 
 
-class RobotModel(ABC):
+class RobotModel(Module, ABC):
     """Abstract rigid manipulator. Subclasses give the closed forms; the dynamics below are shared."""
 
     #: the model's own parameter values (published, or from its URDF), used when a scenario gives no plant.phi;

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..arrays import array_namespace
+from ..pytree import Module
 from ..validation import ConfigError, as_vector
 
 Array = Any
@@ -107,7 +108,7 @@ FUNCTIONS = {"regressor": ("q", "dq", "v", "a"), "momentum": ("q", "dq"), "remai
 
 
 @dataclass(frozen=True)
-class Geometry:
+class Geometry(Module):
     """What the symbolic derivation depends on (hashable): joint types ('R'/'P'), DH numbers, convention, gravity.
 
     Standard DH: link frame i = frame i−1 · Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i); modified (Craig): frame i−1 · Rx(α_i)
@@ -378,7 +379,7 @@ def cache_dir() -> Path:
 
 
 @dataclass(frozen=True, eq=False)
-class Compiled:
+class Compiled(Module):
     """The generated functions for Python floats (`math`) and numpy, and where their values go: the flat output
     positions of each function's nonzero values, and for each position the index of its value (None: in order)."""
 

@@ -26,6 +26,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..pytree import Module
 from ..validation import ConfigError, as_scalar, check_switch
 from .base import Array, RobotModel
 
@@ -33,7 +34,7 @@ TOL = 1e-8  # a unit column is kept when |R_ii| > TOL; coefficients |β_ij| belo
 
 
 @dataclass(frozen=True, eq=False)
-class BaseParameters:
+class BaseParameters(Module):
     """The result of :func:`base_parameters`.
 
     `K` (b × p) maps standard to base parameters, φ_b = K φ; `independent` lists the b columns of Y that form Y_b,

@@ -39,7 +39,7 @@ from the regressor's acceleration slot (n passes with a = e_k).
 Every method takes leading batch axes and is written with the namespace of its inputs (no writes, no branching on
 values; small products switch between multiply-and-sum and matmul on the static batch size), so the same code runs in
 numpy and under `jax.jit`, `vmap` and `lax.scan` (float64 needs `jax_enable_x64`). The model's constants are numpy
-arrays in `_const`, a dict, which the compiled engine's skeleton keeps as constants.
+arrays in `_const`, a dict, which the model's pytree structure keeps as constants (robotadapt.pytree).
 """
 
 from __future__ import annotations

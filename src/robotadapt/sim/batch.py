@@ -24,12 +24,13 @@ from typing import Any, TypeVar
 import numpy as np
 
 from ..controllers import DCAL, AdaptiveComputedTorque, Composite, InertiaRelated, PassivityBased
-from ..controllers.base import HasDelayLine, Prepares
+from ..grid import Grid
 from ..plant.plant import Plant, SinusoidalDisturbance
 from ..trajectories import SumOfSines
 from ..validation import ConfigError, as_array, as_scalar, as_vector
+from .backends import Run, execute
 from .driver import drive
-from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend, run_on
+from .integrators import RK4, Sampled, SolveIVP, check_plant_step
 from .loop import MAX_LOG_BYTES, ClosedLoop, Ring, RK4Step
 from .outputs import batch_outputs, outputs
 from .result import SimulationResult
@@ -278,17 +279,16 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
     if isinstance(integrator, Sampled):
         return _sampled_batch(runs, integrator, t_final, log_every, max_state, progress, dict(info or {}))
     dt, (N, n) = integrator.dt, runs.q0.shape
-    n_steps = int(np.ceil(t_final / dt - 1e-9))
+    grid = Grid(dt, t_final, log_every)
+    n_steps = grid.n
     log_bytes = 8.0 * (n_steps // log_every + 1) * N * (runs.s0.shape[1] + runs.x0.shape[1])
     if log_bytes > MAX_LOG_BYTES:
         raise ConfigError("simulation.log_every", f"{N} runs of {n_steps} steps would keep a {log_bytes / 1e9:.3g} GB "
                           "log; log every more steps")
     controllers = _prepared(runs.controllers, runs.trajectories, dt, t_final)
     loop = ClosedLoop(stack(runs.plants, "plant"), stack(controllers, "controller"), n, monitored=True)
-    line = None  # the delay line, slots (N_slots, N, n): one per run
-    if isinstance(loop.controller, HasDelayLine):
-        line = Ring.start(np.stack([c.delay_line(dt, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)],
-                                   axis=1))
+    buffers = [c.delay_line(dt, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)]
+    line = None if buffers[0] is None else Ring.start(np.stack(buffers, axis=1))  # slots (N_slots, N, n), one per run
 
     singles = [RK4Step(ClosedLoop(p, controllers[i], n, monitored=True), dt, max_state)
                for i, p in enumerate(runs.plants)]  # what words each run's status
@@ -297,15 +297,15 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
     z0 = loop.start(runs.s0, runs.x0)
     feed = rk4.feed(stack(runs.trajectories, "trajectory"), runs=True)
     traceable = all(p.model.traceable for p in runs.plants) and all(c.model.traceable for c in controllers)
-    backend = choose_backend(integrator.backend, n_steps * len(controllers), traceable)
+    asked = Run(rk4, (z0, line), feed, n_steps * len(controllers), traceable=traceable)
 
     def run(backend: str) -> Any:
         return drive(singles, [], feed, n_steps, log_every, backend=backend, stacked=(rk4, (z0, line)),
                      progress=progress)
 
-    trace, _ = run_on(integrator.backend, backend, run)
+    trace, _ = execute(integrator.backend, asked, run)
     z = trace.records
-    return BatchResult(dt * (log_every * np.arange(len(z))), z, trace.n_logged, tuple(trace.status), runs.plants,
+    return BatchResult(grid.times(len(z)), z, trace.n_logged, tuple(trace.status), runs.plants,
                        controllers, runs.trajectories, time.perf_counter() - wall, dict(info or {}))
 
 
@@ -321,26 +321,27 @@ def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, m
         if plant.stepped_on_host:
             opts = host_sampling(plant, opts)
     Ts, (N, n) = opts.control_period, runs.q0.shape
-    n_ticks = int(np.ceil(t_final / Ts - 1e-9))
+    grid = Grid(Ts, t_final, log_every)
+    n_ticks = grid.n
     log_bytes = 8.0 * (n_ticks // log_every + 1) * N * (runs.s0.shape[1] + runs.x0.shape[1] + 2 + 4 * n)
     if log_bytes > MAX_LOG_BYTES:
         raise ConfigError("simulation.log_every", f"{N} runs of {n_ticks} ticks would keep a {log_bytes / 1e9:.3g} "
                           "GB log; log every more ticks")
     controllers = _prepared(runs.controllers, runs.trajectories, Ts, t_final)
     loops = [ClosedLoop(p, controllers[i], n, monitored=True) for i, p in enumerate(runs.plants)]
-    lines = None
-    if isinstance(controllers[0], HasDelayLine):
-        lines = [np.array(c.delay_line(Ts, runs.q0[i], runs.dq0[i]), dtype=float) for i, c in enumerate(controllers)]
+    buffers = [c.delay_line(Ts, runs.q0[i], runs.dq0[i]) for i, c in enumerate(controllers)]
+    lines = None if buffers[0] is None else [np.array(b, dtype=float) for b in buffers]
     first = runs.trajectories[0]
     traj = first if all(_same(tr, first) for tr in runs.trajectories[1:]) else list(runs.trajectories)
     z0 = np.stack([loop.start(runs.s0[i], runs.x0[i]) for i, loop in enumerate(loops)])
     traceable = all(p.model.traceable for p in runs.plants) and all(c.model.traceable for c in controllers)
-    backend = choose_backend(opts.backend, n_ticks * N, traceable)
+    step = RK4Step(loops[0], Ts, max_state)  # the first run's loop: what the backends are asked about
+    asked = Run(step, step.start(z0[0], None if lines is None else lines[0]), step.feed(runs.trajectories[0]),
+                n_ticks * N, traceable=traceable)
     wall = time.perf_counter()
     try:
-        (t, z, n_logged, status, logged), backend = run_on(
-            opts.backend, backend, lambda b: integrate_batch(loops, traj, z0, opts, n_ticks, log_every, max_state,
-                                                             progress, lines, b))
+        (t, z, n_logged, status, logged), backend = execute(
+            opts.backend, asked, lambda b: integrate_batch(loops, traj, z0, opts, grid, max_state, progress, lines, b))
     except ConfigError as exc:
         if exc.field == "simulation":
             raise NotBatchable(exc.field, exc.reason) from None
@@ -351,9 +352,8 @@ def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, m
 
 
 def _prepared(controllers: tuple[Any, ...], trajectories: tuple[Any, ...], dt: float, t_final: float) -> tuple[Any, ...]:
-    """Each run's controller with its tables computed (`Prepares`), once per distinct (controller, trajectory) pair."""
-    if not isinstance(controllers[0], Prepares):
-        return controllers
+    """Each run's controller with its tables computed (the law's `prepare`), once per distinct (controller,
+    trajectory) pair."""
     done: dict[tuple[int, int], Any] = {}
     for c, traj in zip(controllers, trajectories, strict=True):
         if (id(c), id(traj)) not in done:

@@ -1,128 +1,37 @@
-"""JAX for the project's programs: the module itself (:func:`jax_module`, with the persistent compilation cache), the
-float64 scope (:func:`float64`), the skeleton of an object whose float arrays become a program's arguments
-(:func:`skeleton`, :func:`rebuild`), one-off compiled maps (:func:`compiled_map`) and the pass that writes short sums
-out (:func:`lean`). The compiled loop itself is the one driver's (:mod:`robotadapt.sim.driver`).
+"""One-off compiled maps (:func:`compiled_map`) and the pass that writes short sums out (:func:`lean`). The compiled
+loop itself is the one driver's (:mod:`robotadapt.sim.driver`); JAX and its float64 scope are
+:mod:`robotadapt.tracing`'s, the objects' leaves and structure :mod:`robotadapt.pytree`'s.
 
 Nothing here is a second copy of a model or a controller: the models and controllers are written against the array API
-(`xp = array_namespace(...)`); traced with JAX arrays they build one XLA program. float64 is on for the project's
-programs only (:func:`float64`, a thread-local scope around each entry point: the user's `jax_enable_x64` stays as it
-was), so a run equals the numpy backend's to round-off (1e-9 is what the tests ask). Compiled programs are cached on
-disk (`$ROBOTADAPT_CACHE/jax`, default `~/.cache/robotadapt/jax`), so a second process does not pay the compilation
-again; the cache directory is set only where the user has set none (JAX has one per process). The same code runs on a
-GPU where `jax[cuda]` is installed (JAX picks the device; nothing here needs one).
+(`xp = array_namespace(...)`); traced with JAX arrays they build one XLA program. The same code runs on a GPU where
+`jax[cuda]` is installed (JAX picks the device; nothing here needs one).
 """
 
 from __future__ import annotations
 
-import copy
-import os
-from collections.abc import Callable, Iterator
-from dataclasses import is_dataclass
-from functools import cache, wraps
-from pathlib import Path
-from typing import Any, TypeVar
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
+from .. import pytree
+from ..tracing import PROGRAMS, float64, is_call, jax_module
 from ..validation import ConfigError
 
 Array = Any
-F = TypeVar("F", bound=Callable[..., Any])
-_MAX_PROGRAMS = 16
-
-
-@cache
-def jax_module() -> Any:
-    """JAX, with the persistent compilation cache set up where the user has set none; a ConfigError when it is not
-    installed. float64 is not switched on here: :func:`float64` scopes it."""
-    try:
-        import jax
-    except ImportError:
-        raise ConfigError("simulation.backend", "the 'jax' backend needs JAX: pip install 'robotadapt[jax]'") from None
-    if jax.config.jax_compilation_cache_dir is None:  # type: ignore[attr-defined]
-        root = Path(os.environ.get("ROBOTADAPT_CACHE", Path.home() / ".cache" / "robotadapt"))
-        jax.config.update("jax_compilation_cache_dir", str(root / "jax"))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    return jax
-
-
-def float64(fn: F) -> F:
-    """`fn` run with JAX's float64 on for the calling thread, within the call only (`jax.enable_x64`): the project's
-    programs are traced and called in float64, and the user's `jax_enable_x64` is as it was afterwards."""
-    @wraps(fn)
-    def scoped(*args: Any, **kwargs: Any) -> Any:
-        with jax_module().enable_x64(True):
-            return fn(*args, **kwargs)
-
-    return scoped  # type: ignore[return-value]
-
-
-def skeleton(obj: Any, leaves: list[Array]) -> Any:
-    """A hashable description of `obj` (the closed loop: plant, model, controller, the dataclasses inside) with its
-    float arrays moved to `leaves`: two loops with the same skeleton share one compiled program, their gains, true
-    parameters and tables passed as arguments. Other values (floats, flags, integer tables, the arrays of a dict of
-    constants) are part of the skeleton; an unhashable one is taken by identity."""
-    if isinstance(obj, np.ndarray):
-        if obj.dtype.kind == "f":
-            leaves.append(obj)
-            return ("leaf", obj.shape)
-        return ("const", obj.shape, obj.dtype.str, obj.tobytes())
-    if is_dataclass(obj) and not isinstance(obj, type):
-        return (type(obj), tuple((k, skeleton(v, leaves)) for k, v in vars(obj).items()))
-    if isinstance(obj, tuple | list):
-        return (type(obj), tuple(skeleton(v, leaves) for v in obj))
-    if isinstance(obj, dict):  # a model's table of structural constants (a kinematic tree's `_const`): by value
-        return (dict, tuple((k, _constant(v)) for k, v in sorted(obj.items())))
-    return _constant(obj)
-
-
-def _constant(obj: Any) -> Any:
-    """`obj` as a hashable constant of a skeleton: arrays by their bytes, an unhashable object by its identity."""
-    if isinstance(obj, np.ndarray):
-        return ("const", obj.shape, obj.dtype.str, obj.tobytes())
-    if isinstance(obj, tuple | list):
-        return (type(obj), tuple(_constant(v) for v in obj))
-    try:
-        hash(obj)
-    except TypeError:
-        return ("id", id(obj))
-    return obj
-
-
-def rebuild(obj: Any, leaves: Iterator[Array]) -> Any:
-    """`obj` with the arrays `skeleton` took replaced, in the same order, by `leaves` (shallow copies: the
-    dataclasses' validation is not run again on traced values)."""
-    if isinstance(obj, np.ndarray):
-        return next(leaves) if obj.dtype.kind == "f" else obj
-    if is_dataclass(obj) and not isinstance(obj, type):
-        new = copy.copy(obj)
-        for k, v in vars(obj).items():
-            object.__setattr__(new, k, rebuild(v, leaves))
-        return new
-    if isinstance(obj, tuple | list):
-        items = [rebuild(v, leaves) for v in obj]
-        return type(obj)(*items) if hasattr(obj, "_fields") else type(obj)(items)  # a NamedTuple takes its fields
-    return obj
-
-
-_MAPS: dict[Any, Callable[..., Any]] = {}
 
 
 @float64
 def compiled_map(fn: Callable[..., Any], obj: Any, static: Any, *args: Any) -> Any:
-    """`fn(obj, static, *args)` evaluated by JAX, numpy arrays out: `obj` (a closed loop) with its float arrays passed as
-    arguments (:func:`skeleton`), so objects of one shape share one program; `static` (hashable) is part of the
-    program. A ConfigError when `fn` meets code that needs concrete values (numpy-only code)."""
+    """`fn(obj, static, *args)` evaluated by JAX, numpy arrays out: `obj` (a closed loop, a pytree) with its leaves
+    passed as arguments, so objects of one structure share one program; `static` (hashable) is part of the program. A
+    ConfigError when `fn` meets code that needs concrete values (numpy-only code)."""
     jax = jax_module()
-    leaves: list[Array] = []
-    key = (fn, skeleton(obj, leaves), static)
-    if key not in _MAPS:
-        template = rebuild(obj, iter(leaves))
-        if len(_MAPS) >= _MAX_PROGRAMS:
-            _MAPS.pop(next(iter(_MAPS)))
-        _MAPS[key] = jax.jit(lambda arrays, *a: fn(rebuild(template, iter(arrays)), static, *a))
+    leaves, structure = pytree.flatten(obj)
+    program = PROGRAMS.get(("map", fn, structure, static),
+                           lambda: jax.jit(lambda arrays, *a: fn(pytree.unflatten(structure, arrays), static, *a)))
     try:
-        out = _MAPS[key](leaves, *args)
+        out = program(leaves, *args)
     except Exception as exc:  # tracing met code that needs concrete values
         raise ConfigError("simulation.backend", f"{type(exc).__name__}: {str(exc)[:120]}") from None
     return jax.tree_util.tree_map(np.asarray, out)
@@ -154,11 +63,7 @@ def lean(fn: Callable[..., Any]) -> Callable[..., Any]:
 
 def _size(jaxpr: Any) -> int:
     """The number of operations of a jaxpr, calls counted by their bodies."""
-    return sum(_size(e.params["jaxpr"].jaxpr) if _is_call(e) else 1 for e in jaxpr.eqns)
-
-
-def _is_call(eqn: Any) -> bool:
-    return eqn.primitive.name in ("pjit", "jit", "closed_call") and hasattr(eqn.params.get("jaxpr"), "jaxpr")
+    return sum(_size(e.params["jaxpr"].jaxpr) if is_call(e) else 1 for e in jaxpr.eqns)
 
 
 def _evaluate(jaxpr: Any, consts: list[Any], args: list[Any], small: int) -> list[Any]:
@@ -178,7 +83,7 @@ def _evaluate(jaxpr: Any, consts: list[Any], args: list[Any], small: int) -> lis
             out = [_dot(ins[0], ins[1], params["dimension_numbers"])]
         elif name == "reduce_sum" and floats and 0 < _terms(ins[0].shape, params["axes"]) <= small:
             out = [_sum(ins[0], params["axes"])]
-        elif _is_call(eqn) and small:
+        elif is_call(eqn) and small:
             out = _evaluate(params["jaxpr"].jaxpr, params["jaxpr"].consts, ins, small)
         else:
             bind = eqn.primitive.get_bind_params(params)  # older JAX: (subfunctions, params)

@@ -2,8 +2,8 @@
 
 The vector field is :meth:`robotadapt.sim.loop.ClosedLoop.rate` with the reference evaluated inside the program (the
 trajectories are array-API code), so the whole adaptive integration (steps, error estimates, step-size control, the
-samples every `dt`) is one XLA program, cached by the loop's skeleton as the fixed-step engine's are
-(:mod:`robotadapt.sim.compiled`): Example 6.3.1 over 10 s at rtol 1e-8 takes milliseconds instead of scipy's seconds.
+samples every `dt`) is one XLA program, cached by the loop's structure as a pytree as the fixed-step engine's are
+(:mod:`robotadapt.pytree`): Example 6.3.1 over 10 s at rtol 1e-8 takes milliseconds instead of scipy's seconds.
 
 The methods are the same Runge–Kutta pairs as scipy's: RK45 → `diffrax.Dopri5` (Dormand–Prince 5(4)), RK23 →
 `diffrax.Bosh3` (Bogacki–Shampine 3(2)), DOP853 → `diffrax.Dopri8` (Dormand–Prince 8(7); scipy's DOP853 estimates its
@@ -26,9 +26,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..controllers.base import HasDelayLine, HasGuard
+from .. import pytree
+from ..grid import Grid
+from ..tracing import PROGRAMS, float64, jax_module
 from ..validation import ConfigError
-from .compiled import float64, jax_module, rebuild, skeleton
 from .status import Status
 
 if TYPE_CHECKING:
@@ -39,8 +40,6 @@ if TYPE_CHECKING:
 Array = Any
 METHODS = {"RK45": "Dopri5", "RK23": "Bosh3", "DOP853": "Dopri8"}  # scipy's name → diffrax's solver of the same pair
 MAX_STEPS = 10**7  # accepted and rejected steps of one run at most: a failing run ends, never loops for ever
-
-_PROGRAMS: dict[Any, Callable[..., Any]] = {}
 
 
 @cache
@@ -59,32 +58,34 @@ def check_compilable(loop: ClosedLoop, method: str) -> None:
     if method not in METHODS:
         raise ConfigError("simulation.backend", f"{method} has no compiled counterpart (diffrax has no Radau IIA, BDF "
                           f"or LSODA); use method = 'RK45', 'RK23' or 'DOP853', or backend = 'numpy'")
-    if isinstance(loop.controller, HasGuard | HasDelayLine):
+    if loop.controller.has("guard") or loop.controller.has("delay_line"):
         raise ConfigError("simulation.backend", f"{type(loop.controller).__name__} (a guard or a delay line) runs "
                           "error-controlled on numpy only; use backend = 'numpy' or method = 'rk4'")
 
 
 def _program(loop: ClosedLoop, traj: Trajectory, opts: SolveIVP) -> tuple[Callable[..., Any], list[Array]]:
     """The jitted diffrax solve for loops and references shaped like these, and their arrays to call it with."""
-    leaves: list[Array] = []
-    key = (skeleton((loop, traj), leaves), opts.method, opts.rtol, opts.atol)
-    if key in _PROGRAMS:
-        return _PROGRAMS[key], leaves
+    leaves, structure = pytree.flatten((loop, traj))
+    key = ("ivp", structure, opts.method, opts.rtol, opts.atol)
+    return PROGRAMS.get(key, lambda: _solve(loop, structure, opts)), leaves
+
+
+def _solve(loop: ClosedLoop, structure: Any, opts: SolveIVP) -> Callable[..., Any]:
+    """The jitted diffrax solve of the loop and reference of `structure` (their leaves its first argument)."""
     dfx, jax = _diffrax(), jax_module()
     import optimistix  # diffrax's own dependency: the event's root finder
 
     jnp = jax.numpy
-    template = rebuild((loop, traj), iter(leaves))
 
     def margin(t: Array, y: Array, args: Array, **kwargs: Any) -> Array:
         """max_state (`args`) − max|y|, y the state z: the run stops where it crosses zero (located by Newton's method
         on the step's interpolant, as scipy's event is by its root finder)."""
-        y = template[0].guarded_part(y)
+        y = loop.guarded_part(y)  # what the guard reads depends on the loop's structure only
         return jnp.where(jnp.all(jnp.isfinite(y)), args - jnp.max(jnp.abs(y)), -1.0)
 
     @jax.jit
     def run(arrays: list[Array], z0: Array, ts: Array, max_state: Array) -> tuple[Array, Array, Array, Array]:
-        traced, reference = rebuild(template, iter(arrays))
+        traced, reference = pytree.unflatten(structure, arrays)
 
         def field(t: Array, z: Array, args: Any) -> Array:
             return traced.rate(t, z, reference(t))[0]
@@ -98,19 +99,17 @@ def _program(loop: ClosedLoop, traj: Trajectory, opts: SolveIVP) -> tuple[Callab
         t_end = jnp.max(jnp.where(jnp.isfinite(sol.ts), sol.ts, -jnp.inf))
         return sol.ys[:-1], t_end, jnp.any(jnp.asarray(sol.event_mask)), sol.result._value
 
-    if len(_PROGRAMS) >= 16:
-        _PROGRAMS.pop(next(iter(_PROGRAMS)))
-    _PROGRAMS[key] = run
-    return run, leaves
+    return run
 
 
 @float64
 def integrate_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
                   max_state: float) -> tuple[Array, Array, Status]:
-    """The logged times (every `opts.dt` up to t_final), states and status of an error-controlled run, compiled."""
+    """The logged times (every `opts.dt` on the run grid, :mod:`robotadapt.grid`), states and status of an
+    error-controlled run, compiled."""
     check_compilable(loop, opts.method)
     run, arrays = _program(loop, traj, opts)
-    t_eval = opts.dt * np.arange(int(np.floor(t_final / opts.dt + 1e-9)) + 1)
+    t_eval = Grid(opts.dt, t_final).times()
     try:
         ys, t_end, stopped, code = run(arrays, np.asarray(z0, dtype=float), t_eval, max_state)
     except Exception as exc:  # tracing met code that needs concrete values

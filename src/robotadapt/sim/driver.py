@@ -14,8 +14,9 @@ gradients is :mod:`robotadapt.sim.gradient`.
 Runs: one transition stepping every run on leading run axes (`stacked`: a batch merged by
 :func:`robotadapt.sim.batch.stack`), or N transitions of one shape (`mapped`): numpy steps them one by one, JAX maps one
 program over them (`jax.vmap`; their float arrays, gains and true parameters, may differ). A stopped run's log repeats
-its last record; the others go on. Compiled programs are kept by the transition's skeleton
-(:func:`robotadapt.sim.compiled.skeleton`) in one bounded cache (`PROGRAMS`), and on disk.
+its last record; the others go on. Compiled programs are kept by the transition's structure as a pytree
+(:func:`robotadapt.pytree.key`: its float arrays are the program's arguments) in the package's one bounded cache
+(:data:`robotadapt.tracing.PROGRAMS`), and on disk.
 """
 
 from __future__ import annotations
@@ -28,18 +29,18 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
+from .. import pytree
 from ..arrays import array_namespace
+from ..tracing import PROGRAMS, float64, jax_module
 from ..validation import ConfigError
-from .compiled import float64, jax_module, rebuild, skeleton
 from .status import Status
 
 Array = Any
 Feed = Callable[[int, int], Any]  # inputs of steps first … first + count − 1: a NamedTuple whose first field is `k`
-GUARD = 3  # the stop code of a law's own guard (HasGuard); 1 and 2 are the divergence guard's (loop.REASONS)
+GUARD = 3  # the stop code of a law's own guard (Law.guard); 1 and 2 are the divergence guard's (loop.REASONS)
 CHUNK = 64  # steps fed to the Python loop at a time: one vectorized reference call for them, a small peak memory
 CHUNK_STEPS = 16384  # most steps per compiled call (the last call is padded)
 INPUT_BYTES = 64e6  # most bytes of inputs fed to one compiled call (all runs together)
-MAX_PROGRAMS = 16
 
 
 class Verdict(NamedTuple):
@@ -62,9 +63,6 @@ class Transition(Protocol):
 
     def compiled(self) -> Callable[[Any, Any], tuple[Any, Any, Verdict]]:
         """The transition as a compiled program calls it (traced; e.g. the dynamics as a function of their own)."""
-
-    def program_key(self) -> Any:
-        """The transition without what only its feed reads (a sensor's seed): runs with equal keys share a program."""
 
     def blanks(self, carry: Any) -> tuple[Any, Any]:
         """Zeros shaped like a step's record and like its verdict's `bad` (None without a guard), from the carry."""
@@ -174,26 +172,27 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
     return records, valid[:T], k_stop, why, bad
 
 
-PROGRAMS: dict[Any, tuple[Any, Callable[..., Any]]] = {}  # compiled programs by (skeleton, log_every, mapping)
 
 
 def _program(transition: Any, log_every: int, mapped: Any, native: bool = False) -> Callable[..., Any]:
     """The jitted scan over blocks of `log_every` steps for transitions shaped like this one (`mapped`: vmapped over
     runs, None: not). `run(arrays, state, xs, n)` scans the blocks of `xs` (`(blocks, log_every, ...)`), keeps each
-    block's first record and its validity, and computes no step after n (the padding of the last call). The entry
-    holds its template, so that ids in a key stay valid. `native`: the program to translate to C, where a padded step
-    is skipped by a branch (XLA computes it and judges it as nothing: cheaper there than a loop of one)."""
-    key = (skeleton(transition.program_key(), []), log_every, mapped, native)
-    if key in PROGRAMS:
-        return PROGRAMS[key][1]
+    block's first record and its validity, and computes no step after n (the padding of the last call). `native`: the
+    program to translate to C, where a padded step is skipped by a branch (XLA computes it and judges it as nothing:
+    cheaper there than a loop of one)."""
+    structure = pytree.key(transition)
+    return PROGRAMS.get(("scan", structure, log_every, mapped, native), lambda: _scan_program(structure, mapped, native))
+
+
+def _scan_program(structure: Any, mapped: Any, native: bool) -> Callable[..., Any]:
+    """The jitted scan of :func:`_program` for transitions of `structure`."""
     jax = jax_module()
     jnp, lax = jax.numpy, jax.lax
-    template = rebuild(transition, iter(_leaves(transition)))
 
     def run(arrays: list[Array], state: Any, xs: Any, n: Array) -> Any:
         def block(state: Any, xs: Any) -> tuple[Any, Any]:
             """The block's steps that exist (none of the padding after step n); the first one's record is kept."""
-            traced = rebuild(template, iter(arrays))  # a copy per trace: a law's cached constants stay in it
+            traced = pytree.unflatten(structure, arrays)  # its cached constants computed from the traced leaves
             step = traced.compiled()
 
             def one(state: Any, inputs: Any) -> tuple[Any, Any]:
@@ -217,17 +216,7 @@ def _program(transition: Any, log_every: int, mapped: Any, native: bool = False)
 
         return lax.scan(block, state, xs)
 
-    program = jax.jit(run if mapped is None else jax.vmap(run, in_axes=(0, 0, mapped, None)))
-    if len(PROGRAMS) >= MAX_PROGRAMS:
-        PROGRAMS.pop(next(iter(PROGRAMS)))
-    PROGRAMS[key] = (template, program)
-    return program
-
-
-def _leaves(transition: Any) -> list[Array]:
-    leaves: list[Array] = []
-    skeleton(transition, leaves)
-    return leaves
+    return jax.jit(run if mapped is None else jax.vmap(run, in_axes=(0, 0, mapped, None)))
 
 
 def _axes(mapped: Any) -> Any:
@@ -239,30 +228,27 @@ def _axes(mapped: Any) -> Any:
     return 0 if mapped else None
 
 
-NATIVE: dict[Any, tuple[Any, Any]] = {}  # C programs by (program description, argument shapes): (native, outputs)
-
-
 def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: Any, xs: Any, n: int) -> Any:
     """`make()(arrays, state, xs, n)` run as C: the program traced on these shapes, translated and built once
     (:mod:`robotadapt.native`); found again, without JAX, in this process or on disk where `static` (the program's
-    description: the transition's skeleton, log_every, mapping) is stable across processes (:func:`_stable`)."""
+    description: the transition's structure, log_every, mapping) is stable across processes (:func:`_stable`)."""
     from ..native import build
 
     leaves = [*arrays, *_flatten(state), *_flatten(xs), n]
     zeros = [np.asarray(a) == 0 for a in arrays]  # structural zeros of gains and tables: folded by the translator
     key = (static, tuple((np.shape(a), np.asarray(a).dtype.str) for a in leaves),
            tuple(np.packbits(z).tobytes() for z in zeros))
-    if key not in NATIVE:
+
+    def found() -> tuple[Any, Any]:
         stable = _stable(key)
-        found = build.remembered(stable) if stable is not None else None
-        if found is None:
-            found = _translate(make(), (arrays, state, xs, n), zeros)
+        program = build.remembered(stable) if stable is not None else None
+        if program is None:
+            program = _translate(make(), (arrays, state, xs, n), zeros)
             if stable is not None:
-                build.remember(stable, *found)
-        if len(NATIVE) >= MAX_PROGRAMS:
-            NATIVE.pop(next(iter(NATIVE)))
-        NATIVE[key] = found
-    native, outputs = NATIVE[key]
+                build.remember(stable, *program)
+        return program
+
+    native, outputs = PROGRAMS.get(("native", key), found)
     values = native(*leaves)
     return map_tree(lambda i: values[i], outputs)
 
@@ -308,9 +294,11 @@ def _stable(key: Any) -> str | None:
 
 
 def _types(key: Any) -> set[type]:
-    """The classes named in a skeleton."""
+    """The classes named in a structure."""
     if isinstance(key, type):
         return {key}
+    if isinstance(key, pytree.Static):
+        return _types(key.key)
     if isinstance(key, tuple):
         return set().union(*(_types(k) for k in key))
     return set()
@@ -338,20 +326,20 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
               mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any]:
     jnp = np if native else jax_module().numpy  # the C program takes host arrays as they are
     if mapped is not None:
-        key = skeleton(runs[0].program_key(), [])
+        key = pytree.key(runs[0])
         for other in runs[1:]:
-            if skeleton(other.program_key(), []) != key:
+            if pytree.key(other) != key:
                 raise ConfigError("simulation", "the runs differ in more than their arrays (a law's kind, a flag, a "
                                   "scalar setting); one batch of sampled-data runs varies gains, tables and true "
                                   "parameters only")
-        arrays = [jnp.asarray(np.stack(parts)) for parts in zip(*(_leaves(r) for r in runs), strict=True)]
+        arrays = [jnp.asarray(np.stack(parts)) for parts in zip(*(pytree.leaves(r) for r in runs), strict=True)]
         shape: tuple[int, ...] = (len(runs),)
         axes = _axes(mapped)
     else:
-        arrays = [jnp.asarray(a) for a in _leaves(transition)]
+        arrays = [jnp.asarray(a) for a in pytree.leaves(transition)]
         shape, axes = _runs_shape(carry), None
     one = transition if mapped is None else runs[0]
-    static = (skeleton(one.program_key(), []), log_every, axes) if native else None  # what the C program is
+    static = (pytree.key(one), log_every, axes) if native else None  # what the C program is
     probe = feed(0, 1)
     step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe))
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded

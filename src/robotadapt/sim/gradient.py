@@ -8,40 +8,25 @@ each block's steps as it goes: memory O(√N) instead of O(N) residuals, for abo
 
 The transition is the one the driver runs, on the same `ClosedLoop`: the logged signals equal the compiled forward
 run's to round-off (tests/test_tune.py asks 1e-9). The loop may hold traced values anywhere (a gain put in by
-:func:`replace_at`, the true φ of a sample): they are constants of the step, not of the program. A law with a delay
-line (the repetitive law, (7.2.32)) carries it in the scan's carry as the forward engines do, written by
+:func:`robotadapt.pytree.replace`, the true φ of a sample): they are constants of the step, not of the program. A law
+with a delay line (the repetitive law, (7.2.32)) carries it in the scan's carry as the forward engines do, written by
 `.at[slot].set`, so the gradient reaches back through every period's û_d(t − T) (tests/test_tune_repetitive.py).
 """
 
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass, replace
-from functools import cached_property
 from typing import Any
 
-import numpy as np
-
-from ..controllers.base import HasDelayLine
+from ..grid import Grid, steps
+from ..tracing import float64, jax_module
 from ..trajectories import Reference, Trajectory
 from ..validation import ConfigError
-from .compiled import float64, jax_module
 from .driver import map_tree, take_run
 from .loop import ClosedLoop
 
 Array = Any
-
-
-def replace_at(obj: Any, path: tuple[str, ...], value: Any) -> Any:
-    """`obj` with the attribute at `path` (e.g. ("controller", "law", "F_p")) set to `value`: shallow copies along the
-    path, no validation (so `value` may be traced), the copies' cached properties dropped (they may derive from the old
-    value); the original is untouched."""
-    new = copy.copy(obj)
-    for name in [k for k in vars(new) if isinstance(getattr(type(new), k, None), cached_property)]:
-        del new.__dict__[name]
-    object.__setattr__(new, path[0], value if len(path) == 1 else replace_at(getattr(obj, path[0]), path[1:], value))
-    return new
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,7 +57,7 @@ class Rollout:
         if isinstance(integrator, Sampled):
             h, n = integrator.control_period, loop.n
             step: Any = Tick(loop, integrator, loop.plant.sensor or Sensor(n), loop.plant.actuator or Actuator(n),
-                             float("inf"), isinstance(loop.controller, HasDelayLine))
+                             float("inf"), loop.controller.has("delay_line"))
             per_run, mapped = feed([step], [trajectory], True)
 
             def inputs(first: int, count: int) -> Any:
@@ -81,7 +66,7 @@ class Rollout:
             h = integrator.dt
             step = RK4Step(loop, h, float("inf"))
             inputs = step.feed(trajectory)
-        n_steps = int(np.ceil(t_final / h - 1e-9))
+        n_steps = steps(t_final, h)
         per_block = max(1, math.isqrt(n_steps + 1))
         blocks = -(-(n_steps + 1) // per_block)
         laid = inputs(0, blocks * per_block)  # the padding after n is fed, computed and not kept
@@ -89,15 +74,13 @@ class Rollout:
 
     @property
     def times(self) -> Array:
-        """The logged instants, `(T,)`."""
-        return self.h * np.arange(0, self.n + 1, self.log_every)
+        """The logged instants, `(T,)`, on the run grid (:mod:`robotadapt.grid`)."""
+        return Grid(self.h, self.n * self.h, self.log_every).times()
 
     def line(self, loop: ClosedLoop, z0: Array) -> Array | None:
-        """The delay line's initial contents for a law with one (HasDelayLine), as the forward engines build it:
+        """The delay line's initial contents for a law with one (Law.delay_line), as the forward engines build it:
         `delay_line(h, q0, q̇0)` at the (q0, q̇0) of `z0` (û_d = 0 on [−T, 0) for the repetitive law); None
         without."""
-        if not isinstance(loop.controller, HasDelayLine):
-            return None
         q0, dq0, _ = loop.split(z0)
         return loop.controller.delay_line(self.h, q0, dq0)
 

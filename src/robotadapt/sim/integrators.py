@@ -7,78 +7,25 @@ that a plant's effects and stiffness suit the integrator.
 from __future__ import annotations
 
 import math
-import warnings
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import Any
 
 from ..plant.plant import Plant
+from ..pytree import Module
 from ..validation import ConfigError, as_scalar
+from .backends import AUTO_MIN_STEPS as AUTO_MIN_STEPS  # importable from here too, as before
+from .backends import NotTraceableWarning as NotTraceableWarning
+from .backends import check_backend
 
 Array = Any
-T = TypeVar("T")
-
-
-BACKENDS = ("auto", "numpy", "jax", "c")
-AUTO_MIN_STEPS = 2000  # "auto" compiles a run of at least this many steps (steps × runs for a batch): below it the
-# numpy loop (≈0.3 ms a step on the two-link arm) finishes before a warm program is traced and loaded (≈0.5 s)
-
-
-def check_backend(backend: Any) -> str:
-    """A valid `simulation.backend` name, else a one-line ConfigError naming the field."""
-    if not isinstance(backend, str) or backend not in BACKENDS:
-        raise ConfigError("simulation.backend", f"expected one of {', '.join(BACKENDS)}; got {backend!r}")
-    if backend == "c":
-        from ..native.build import require_compiler
-
-        require_compiler("simulation.backend")
-    return backend
-
-
-def choose_backend(backend: str, steps: int, traceable: bool, single: bool = False) -> str:
-    """The backend a run takes: "numpy", "jax" or "c" as asked; "auto" compiles a loop whose models are traceable when
-    it has at least `AUTO_MIN_STEPS` steps, and steps it with numpy otherwise. A `single` run compiles to C where a C
-    compiler is present (one native call per chunk, no JAX to import once its program is stored), a batch with JAX."""
-    if backend != "auto":
-        return backend
-    if not traceable or steps < AUTO_MIN_STEPS:
-        return "numpy"
-    from ..native.build import compiler
-
-    return "c" if single and compiler() is not None else "jax"
-
-
-class NotTraceableWarning(UserWarning):
-    """Under `backend = "auto"`, a law or model JAX could not trace was stepped with numpy instead (slower, same
-    numbers), or a program the C translator lacks a primitive of was compiled with JAX; docs/tutorial.md#traceable says
-    what tracing needs and how to check a law."""
-
-
-def run_on(asked: str, backend: str, run: Callable[[str], T]) -> tuple[T, str]:
-    """`run(backend)` and the backend it ran on. Under "auto", a program the C translator lacks a primitive of (a
-    ConfigError naming `native`) runs with JAX, and a program JAX cannot trace (a ConfigError naming
-    `simulation.backend`, e.g. a user's law written with numpy calls) with numpy, each with a warning saying why; a
-    backend asked for by name fails with the error."""
-    try:
-        return run(backend), backend
-    except ConfigError as exc:
-        if asked != "auto" or backend == "numpy" or exc.field not in ("simulation.backend", "native"):
-            raise
-        if exc.field == "native":
-            warnings.warn(f"{exc.reason.split(':')[0]}; compiled with JAX instead (simulation.backend = 'auto')",
-                          NotTraceableWarning, stacklevel=3)
-            return run_on(asked, "jax", run)
-        why = exc.reason.removesuffix("; use backend = 'numpy'")
-        warnings.warn(f"{why}; stepped with numpy instead (simulation.backend = 'auto'): slower, same numbers — "
-                      "docs/tutorial.md#traceable", NotTraceableWarning, stacklevel=3)
-        return run("numpy"), "numpy"
 
 
 @dataclass(frozen=True)
-class RK4:
+class RK4(Module):
     """Classic fixed-step Runge–Kutta 4 with step `dt` (s), stepped by numpy or compiled by JAX
     (:mod:`robotadapt.sim.compiled`) or translated to C (:mod:`robotadapt.native`; the same step, equal to round-off):
-    `backend` "auto" (default: compiled unless the run is short, :func:`choose_backend`), "numpy", "jax" or "c"."""
+    `backend` "auto" (default: compiled unless the run is short, :func:`robotadapt.sim.backends.choose`), "numpy", "jax"
+    or "c"."""
 
     dt: float = 1e-3
     backend: str = "auto"
@@ -118,7 +65,7 @@ _MAX_SUBSTEPS = 10**6
 
 
 @dataclass(frozen=True)
-class Sampled:
+class Sampled(Module):
     """Sampled-data control: the controller runs only at t_k = k·Ts (`control_period` Ts, s) and its torque is held
     over [t_k, t_k + Ts) (zero-order hold); the plant is integrated by RK4 with the step `dt` = Ts/m, m whole (default:
     the largest such step ≤ 1 ms). The controller sees the plant through its sensor (:mod:`robotadapt.plant.sensors`; exact
@@ -128,13 +75,13 @@ class Sampled:
     `discretization` is the rule advancing the controller's state x between ticks, from the samples y_k at t_k:
 
     - ``"euler"``: x_{k+1} = x_k + Ts·f(t_k, x_k, y_k), forward Euler, what `x += Ts * dx` in a control loop does (a
-      law on a manifold, HasStep: its exponential map along f, the natural law);
+      law on a manifold, Law.step: its exponential map along f, the natural law);
     - ``"hold"``: x_{k+1} = x(t_k + Ts) of dx/dt = f(t_k, x, y_k) with t, y and the reference held at their samples,
       integrated by RK4 on the plant's sub-steps: the zero-order-hold equivalent (exact for the linear filters of the
       passivity servo and the composite law, up to RK4's error; the same as Euler when f does not depend on x, as for
       the gradient law).
 
-    A projection (HasProjection) is applied after each update (each sub-step of "hold"). As Ts → 0 the run tends to
+    A projection (Law.project) is applied after each update (each sub-step of "hold"). As Ts → 0 the run tends to
     the continuous-time one, to first order in Ts.
     """
 

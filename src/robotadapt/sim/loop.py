@@ -1,6 +1,6 @@
 """The closed loop, defined once (DESIGN "Simulation"): the state layout z = [s, x], the vector field dz/dt = f(t, z)
 (:class:`ClosedLoop`), the one fixed step every fixed-step path takes (:func:`step`: numpy, batches, the compiled
-engine), the delay line of a law with one (HasDelayLine), the guard of a law with one (HasGuard) and the divergence
+engine), the delay line of a law with one (Law.delay_line), the guard of a law with one (Law.guard) and the divergence
 guard.
 
 State z = [s, x]: the plant's state s = [q, q̇] (then θ, θ̇ of elastic joints and the motor currents, see
@@ -18,17 +18,10 @@ from typing import Any, NamedTuple, cast
 
 import numpy as np
 
-from ..arrays import array_namespace, matvec
-from ..controllers.base import (
-    FiltersTorque,
-    HasGuard,
-    HasInstantEstimate,
-    HasProjection,
-    HasRegressor,
-    HasRegressorProducts,
-    NeedsAcceleration,
-)
+from ..arrays import array_namespace
+from ..controllers.base import as_law
 from ..plant.plant import Plant, same_model
+from ..pytree import Module
 from ..trajectories import Reference, Trajectory
 from .driver import GUARD, Verdict
 from .status import Status
@@ -39,40 +32,40 @@ MAX_LOG_BYTES = 4e9
 
 
 @dataclass(frozen=True, eq=False)
-class ClosedLoop:
+class ClosedLoop(Module):
     """The closed-loop vector field dz/dt = f(t, z), z = [s, x]; the plant receives the saturated torque. Controllers
     that need q̈ get the plant's acceleration for the torque they just applied (no algebraic loop: their torque does not
-    depend on q̈). A law that filters the torque (FiltersTorque) is given the torque the plant receives.
+    depend on q̈). A law that filters the torque (Law.applied) is given the torque the plant receives.
 
     `monitored`: the state also carries, after x, the monitors' integrals w, integrated with the loop at every step
     (never from the logged samples): the passivity integral ∫₀ᵗ −rᵀ Z (φ(t) − φ̂) of (6.4.4) for a law with a
-    passivity output (HasRegressor) whose model is the plant's, so its truth φ(t) is known, and its running minimum
+    passivity output (Law.regressor) whose model is the plant's, so its truth φ(t) is known, and its running minimum
     over the steps (:meth:`after_step`). z = [s, x, w]; the divergence guard reads [s, x] only, without the trailing
     `records` of x a law may keep for its monitor alone (the repetitive law's window integrals of V, (7.2.43))
     (:meth:`guarded_part`)."""
 
     plant: Plant
-    controller: Any  # a Controller, or a NeedsAcceleration law (torque, then update with the plant's q̈)
+    controller: Any  # a Law (one with needs_acceleration: its torque, then its update with the plant's q̈)
     n: int
     monitored: bool = False
     needs_acceleration: bool = field(init=False)
     m: int = field(init=False)  # the plant's state size, 2n + its extra states
     rigid: bool = field(init=False)  # no extra plant states: the fast path
     filters_torque: bool = field(init=False)  # the law filters the applied torque, and an actuator may change it
-    guarded: bool = field(init=False)  # the law has a guard (HasGuard), which traced evaluations read
+    guarded: bool = field(init=False)  # the law has a guard, which traced evaluations read
     w: int = field(init=False)  # how many monitor values trail the state (0, or 2: the passivity integral, its min)
     unguarded: int = field(init=False)  # trailing entries the guard skips: w and the law's own records (`records`)
 
-    def __post_init__(self) -> None:  # a protocol check costs microseconds: once, not per evaluation
-        object.__setattr__(self, "needs_acceleration", isinstance(self.controller, NeedsAcceleration))
-        object.__setattr__(self, "guarded", isinstance(self.controller, HasGuard))
-        object.__setattr__(self, "filters_torque", isinstance(self.controller, FiltersTorque)
-                           and self.plant.actuator is not None)
+    def __post_init__(self) -> None:  # the law's static facts, read once, not per evaluation
+        ctrl = as_law(self.controller)
+        object.__setattr__(self, "needs_acceleration", ctrl.needs_acceleration)
+        object.__setattr__(self, "guarded", ctrl.has("guard"))
+        object.__setattr__(self, "filters_torque", ctrl.has("applied") and self.plant.actuator is not None)
         object.__setattr__(self, "m", 2 * self.n + self.plant.n_extra)
         object.__setattr__(self, "rigid", self.plant.n_extra == 0)
-        passive = self.monitored and isinstance(self.controller, HasRegressor)  # a passivity output
-        object.__setattr__(self, "w", 2 * int(passive and same_model(self.plant.model, self.controller.model)))
-        object.__setattr__(self, "unguarded", self.w + getattr(self.controller, "records", 0))
+        passive = self.monitored and ctrl.has("regressor")  # a passivity output
+        object.__setattr__(self, "w", 2 * int(passive and same_model(self.plant.model, ctrl.model)))
+        object.__setattr__(self, "unguarded", self.w + ctrl.records)
 
     def split(self, z: Array) -> tuple[Array, Array, Array]:
         n = self.n
@@ -96,12 +89,8 @@ class ClosedLoop:
         """The passivity integrand −rᵀ Z (φ(t) − φ̂) = −(Zᵀ r)ᵀ (φ(t) − φ̂) at (q, q̇) as the law sees them, φ̂ as its
         torque uses it (Zᵀ r from the law's regressor products where it has them: the same pass as its torque's)."""
         ctrl = self.controller
-        phi_hat = ctrl.phi_hat_at(t, x, q, dq, ref) if isinstance(ctrl, HasInstantEstimate) else ctrl.phi_hat(x)
-        if isinstance(ctrl, HasRegressorProducts):
-            _, Ztr, _ = ctrl.regressor_products(t, x, q, dq, ref, phi_hat)
-        else:
-            Z, r = ctrl.regressor(t, x, q, dq, ref)
-            Ztr = matvec(Z.mT, r)
+        phi_hat = ctrl.phi_hat_at(t, x, q, dq, ref)
+        _, Ztr, _ = ctrl.regressor_products(t, x, q, dq, ref, phi_hat)
         return -(Ztr * (self.plant.phi_at(t) - phi_hat)).sum(axis=-1)
 
     def torque(self, t: Array, z: Array, ref: Reference) -> Array:
@@ -119,11 +108,11 @@ class ClosedLoop:
         return ds, ds[..., self.n : 2 * self.n]
 
     def rate(self, t: Array, z: Array, ref: Reference) -> tuple[Array, Array | None]:
-        """(dz/dt, ok). `ok` is a guarded law's guard (HasGuard) per run, False where its assumption fails at z (dz/dt
-        then holds NaN); None for a law without one."""
+        """(dz/dt, ok). `ok` is the law's guard per run, False where its assumption fails at z (dz/dt then holds NaN);
+        None for a law without one."""
         q, dq, x = self.split(z)
         xp = array_namespace(z)
-        ok = self.controller.guard(t, x, q, dq, ref) if self.guarded else None
+        ok = self.controller.guard(t, x, q, dq, ref)
         if self.needs_acceleration:
             tau = self.controller.torque(t, x, q, dq, ref)
             head, ddq = self._plant(t, z, q, dq, self.plant.saturate(tau))
@@ -156,10 +145,12 @@ class ClosedLoop:
         return str(self.controller.stop_reason(q, x))
 
     def after_step(self, z: Array) -> Array:
-        """The state after a fixed step: x projected (HasProjection), the passivity integral's running minimum
+        """The state after a fixed step: x projected (the law's `project`), the passivity integral's running minimum
         updated."""
-        if isinstance(self.controller, HasProjection):
-            z = self.with_x(z, self.controller.project(self.split(z)[2]))
+        x = self.split(z)[2]
+        projected = self.controller.project(x)
+        if projected is not x:
+            z = self.with_x(z, projected)
         if not self.w:
             return z
         xp = array_namespace(z)
@@ -176,7 +167,7 @@ REASONS = {1: "non-finite state", 2: "state exceeded {max_state:g} in magnitude"
 
 @dataclass(frozen=True)
 class DelayLine:
-    """The initial contents `(N, ..., n)` of the delay line of a controller with one (HasDelayLine). A run carries the
+    """The initial contents `(N, ..., n)` of the delay line of a controller with one (Law.delay_line). A run carries the
     line in its state as a :class:`Ring`, written only through :func:`ring_write`, so the controller stays pure."""
 
     buffer: Array
@@ -279,7 +270,7 @@ class StepInputs(NamedTuple):
 
 
 @dataclass(frozen=True, eq=False)
-class RK4Step:
+class RK4Step(Module):
     """A continuous-time run's fixed step as a transition of the one driver (:mod:`robotadapt.sim.driver`): carry (z,
     delay line or None), inputs (k, the reference at t_k, t_k + dt/2, t_k + dt); the record is the state applied
     over step k (what the log at t_k holds); the verdict is the divergence guard on z_{k+1} (codes of `REASONS`: a stop
@@ -311,12 +302,10 @@ class RK4Step:
     def compiled(self) -> Callable[[Any, Any], Any]:
         """The step with dz/dt as a function of its own (an n-DOF arm's dynamics are thousands of operations: traced
         and lowered once, not once per RK4 stage) and its short sums written out (:func:`robotadapt.sim.compiled.lean`)."""
-        from .compiled import jax_module, lean
+        from ..tracing import jax_module
+        from .compiled import lean
 
         return lean(partial(self.__call__, rate=jax_module().jit(self.loop.rate)))
-
-    def program_key(self) -> RK4Step:
-        return self
 
     def blanks(self, carry: tuple[Array, Ring | None]) -> tuple[Array, Array | None]:
         """Zeros like the record (the state) and like `bad` (the stage state a guard failed at; None without one)."""

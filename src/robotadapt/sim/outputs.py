@@ -7,14 +7,12 @@ often the run was logged.
 
 from __future__ import annotations
 
-import copy
-from dataclasses import is_dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from ..arrays import matvec
-from ..controllers.base import HasFilteredError, HasInstantEstimate, HasLyapunov
 from ..trajectories import Reference, Trajectory
 from ..validation import ConfigError
 from .compiled import compiled_map
@@ -66,12 +64,8 @@ def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z
              logged: dict[str, Array] | None) -> tuple[dict[str, Array | None], dict[str, Array]]:
     """The record's arrays at the logged `t` (`times`: t shaped to broadcast against the runs' axes of `z`), the
     true φ there under "truth" (None when unknown, or when the law estimates none of the plant's parameters), and
-    the extra monitor series. The controller's derived constants (Γ⁻¹ for V) are cached on a copy: the caller's
-    controller stays as it was, so its next run's loop is the same loop (one compiled program, not two)."""
+    the extra monitor series."""
     ctrl, plant = loop.controller, loop.plant
-    if is_dataclass(ctrl):  # the library's laws (a user's object may not copy: it is left as it is)
-        ctrl = copy.copy(ctrl)
-        loop = ClosedLoop(plant, ctrl, loop.n, loop.monitored)
     q, dq, x = loop.split(z)
     ref = Reference(*(a if a.shape == q.shape else np.broadcast_to(a, q.shape) for a in trajectory(times)))
     extras = dict(logged or {})
@@ -115,13 +109,10 @@ def _maps(loop: ClosedLoop, flags: tuple[bool], times: Array, z: Array, ref: Ref
         out["tau"] = plant.saturate(out["commanded"])
     q_seen = q if q_measured is None else q_measured
     dq_seen = dq if dq_measured is None else dq_measured
-    phi_hat = (ctrl.phi_hat_at(times, x, q_seen, dq_seen, ref) if isinstance(ctrl, HasInstantEstimate)
-               else ctrl.phi_hat(x))
-    out["phi_hat"] = phi_hat
-    if isinstance(ctrl, HasLyapunov) and truth is not None:
+    out["phi_hat"] = ctrl.phi_hat_at(times, x, q_seen, dq_seen, ref)
+    if truth is not None:
         out["V"] = ctrl.lyapunov(times, x, q, dq, ref, truth)
-    if isinstance(ctrl, HasFilteredError):
-        out["r"] = ctrl.filtered_error(times, x, q, dq, ref)
+    out["r"] = ctrl.filtered_error(times, x, q, dq, ref)
     return out
 
 
@@ -129,9 +120,9 @@ def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | 
             status: Status, wall: float, info: dict[str, Any]) -> SimulationResult:
     phi_hat = signals["phi_hat"]
     assert phi_hat is not None
-    caveat = getattr(ctrl, "passivity_caveat", None)  # a law whose passivity claim its gains may not imply
-    if signals["passivity"] is not None and caveat is not None and caveat() is not None:
-        info = {**info, "passivity_caveat": caveat()}
+    caveat = ctrl.passivity_caveat()  # a law whose passivity claim its gains may not imply
+    if signals["passivity"] is not None and caveat is not None:
+        info = {**info, "passivity_caveat": caveat}
     result = SimulationResult(t=t, **signals, phi=phi,  # type: ignore[arg-type]
                               param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
                               state_names=ctrl.state_names, status=status, wall_time=wall, info=info)
@@ -166,6 +157,5 @@ def controller_series(res: SimulationResult, controller: Any, phi_t: Array | Non
             changed = np.any(before != phi_t, axis=-1)
             out["parameter_lyapunov_jump"] = np.where(changed, out["parameter_lyapunov"]
                                                       - parameter_part(V_before, before), 0.0)
-    if hasattr(controller, "lambda_min_P_inv"):  # least squares, or a wrapper around it
-        out["lambda_min_P_inv"] = controller.lambda_min_P_inv(res.x)
+    out.update(controller.monitors(res.x))  # the law's own (least squares: λ_min(P⁻¹))
     return out

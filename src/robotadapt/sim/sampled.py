@@ -14,7 +14,7 @@ draws them from the run's seed ahead, a block of ticks at a time, for both drive
 2. a delay line (the repetitive law, N = T/Ts ticks per period) is read at slot k mod N and written with what the law
    returns (a new array: :func:`robotadapt.sim.loop.ring_write`);
 3. the controller gives τ_k and ẋ_k from (t_k, x_k, q_m, q̇_m, ref(t_k)) (with q̈_m for a law that needs it); where a
-   guarded law's assumption fails (HasGuard, its guard read at the sample) the run stops at t_k, this tick unlogged;
+   guarded law's assumption fails (Law.guard, read at the sample) the run stops at t_k, this tick unlogged;
 4. the actuator turns τ_k into the applied u_k (delay, saturation, rate limit; :mod:`robotadapt.plant.actuators`);
 5. the record of the tick: the true state s_k, x_k, u_k, τ_k, q_m, q̇_m (the drivers keep every `log_every`-th);
 6. the plant: `substeps` RK4 steps of dt = Ts/substeps of ds/dt = f(t, s, u_k) (a MuJoCo plant: `substeps` steps of
@@ -30,18 +30,19 @@ The last tick (t = t_final) is measured, computed and logged, not integrated (th
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from functools import partial
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from ..arrays import array_namespace, repeat, rk4
-from ..controllers.base import FiltersTorque, HasProjection, HasStep
+from ..grid import Grid
 from ..plant.actuators import Actuator
 from ..plant.sensors import Sensor
+from ..pytree import Module
+from ..tracing import jax_module
 from ..trajectories import Reference
-from .compiled import jax_module
 from .driver import GUARD, Verdict, drive
 from .loop import REASONS, ClosedLoop, ring_write
 from .status import Status
@@ -114,7 +115,7 @@ def guarded_rk4(g: Callable[[Array], tuple[Array, Array]], y: Array, h: float) -
 
 
 @dataclass(frozen=True, eq=False)
-class Tick:
+class Tick(Module):
     """One control tick of the sampled-data loop as a pure function of (carry, inputs) (module docstring). Holds
     constants only: the closed loop, the sampling options, the sensor and actuator (defaults: exact, none), the
     divergence bound and whether the law has a delay line."""
@@ -125,14 +126,6 @@ class Tick:
     actuator: Actuator
     max_state: float
     has_line: bool
-    projects: bool = field(init=False)
-    steps: bool = field(init=False)  # a law on a manifold: "euler" takes its exponential map (HasStep)
-    filters: bool = field(init=False)  # the law filters the torque (FiltersTorque): it is given the held u_k
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "projects", isinstance(self.loop.controller, HasProjection))
-        object.__setattr__(self, "steps", isinstance(self.loop.controller, HasStep))
-        object.__setattr__(self, "filters", isinstance(self.loop.controller, FiltersTorque))
 
     def start(self, z0: Array, line: Array | None = None) -> Carry:
         """The carry before tick 0: z0 = [s0, x0, w0] (ClosedLoop.start) and the delay line's initial contents (None: no
@@ -168,14 +161,6 @@ class Tick:
         record = Record(zero, *(xp.zeros(n) for _ in range(4)))
         return record, (xp.zeros(n), xp.zeros_like(carry.x)) if self.loop.guarded else None
 
-    def program_key(self) -> Tick:
-        """The tick with its sensor's seed set aside: the noise is drawn on the host from each run's own seed, so runs
-        that differ only in it share one program."""
-        loop, plant = self.loop, self.loop.plant
-        if plant.sensor is not None:
-            loop = replace(loop, plant=replace(plant, sensor=replace(plant.sensor, seed=0)))
-        return replace(self, loop=loop, sensor=replace(self.sensor, seed=0))
-
     def sample(self, carry: Carry, inputs: Any) -> tuple[Carry, Sample]:
         """Steps 1–4: the carry with the sensor's, the delay line's and the actuator's memory advanced and x_k read
         from the line, and the tick's samples."""
@@ -187,7 +172,7 @@ class Tick:
             slot = k % line.shape[0]
             x, store = ctrl.sample(t, x, q_m, dq_m, ref, array_namespace(line).asarray(line[slot], copy=True))
             line = ring_write(line, slot, store)
-        ok = ctrl.guard(t, x, q_m, dq_m, ref) if self.loop.guarded else None
+        ok = ctrl.guard(t, x, q_m, dq_m, ref)
         if self.loop.needs_acceleration:
             tau = ctrl.torque(t, x, q_m, dq_m, ref)
             u, actuator = self.actuator.apply(carry.actuator, tau, Ts)
@@ -195,8 +180,7 @@ class Tick:
         else:
             tau, dx = ctrl(t, x, q_m, dq_m, ref)
             u, actuator = self.actuator.apply(carry.actuator, tau, Ts)
-            if self.filters:
-                dx = ctrl.applied(dx, tau, u)
+            dx = ctrl.applied(dx, tau, u)  # a law that filters the torque is given the held u_k
         dw = self.loop.dissipation(t, x, q_m, dq_m, ref)[..., None] if self.loop.w else None
         return carry._replace(x=x, sensor=sensor, actuator=actuator, line=line), Sample(q_m, dq_m, ddq_m, tau, u, dx,
                                                                                         ok, dw)
@@ -225,9 +209,6 @@ class Tick:
             w = xp.concatenate([total, xp.minimum(carry.w[1:], total)])
         return carry._replace(s=s, x=x, w=w), why, x_bad
 
-    def project(self, x: Array) -> Array:
-        return self.loop.controller.project(x) if self.projects else x
-
     def next_state(self, t: Array, ref: Reference, x: Array, sample: Sample) -> tuple[Array, Array | None, Array | None]:
         """x_{k+1} by the discrete rule, projected (each sub-step of "hold", where ẋ = f(x) has every other input held
         at its sample, u_k too; a law that filters the torque filters u_k); for a guarded law under "hold" (traced),
@@ -235,22 +216,22 @@ class Tick:
         opts, ctrl, q, dq, ddq = self.opts, self.loop.controller, sample.q_m, sample.dq_m, sample.ddq_m
         if opts.discretization == "euler":
             h = opts.control_period
-            return self.project(ctrl.step(x, sample.dx, h) if self.steps else x + h * sample.dx), None, None
+            return ctrl.project(ctrl.step(x, sample.dx, h)), None, None
 
         def rate(_t: Any, y: Array) -> Array:
             if self.loop.needs_acceleration:
                 return ctrl.update(t, y, q, dq, ddq, ref)
             tau, dy = ctrl(t, y, q, dq, ref)
-            return ctrl.applied(dy, tau, sample.u) if self.filters else dy
+            return ctrl.applied(dy, tau, sample.u)
 
         xp = array_namespace(x)
         if sample.ok is None:
-            return repeat(xp, opts.substeps, lambda _i, y: self.project(rk4(rate, 0.0, y, opts.dt)), x), None, None
+            return repeat(xp, opts.substeps, lambda _i, y: ctrl.project(rk4(rate, 0.0, y, opts.dt)), x), None, None
 
         def guarded(_i: Any, state: tuple[Array, Array, Array]) -> tuple[Array, Array, Array]:
             y, ok, bad = state
             y, ok_i, bad_i = guarded_rk4(lambda y: (rate(0.0, y), ctrl.guard(t, y, q, dq, ref)), y, opts.dt)
-            return self.project(y), ok & ok_i, xp.where(ok, bad_i, bad)
+            return ctrl.project(y), ok & ok_i, xp.where(ok, bad_i, bad)
 
         return repeat(xp, opts.substeps, guarded, (x, xp.asarray(True), x))
 
@@ -327,9 +308,9 @@ class _Draws:
 
 
 def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory], z0: Array, opts: Sampled,
-                    n_ticks: int, log_every: int, max_state: float, progress: bool, lines: list[Array] | None,
+                    grid: Grid, max_state: float, progress: bool, lines: list[Array] | None,
                     backend: str = "numpy") -> tuple[Array, Array, Array, list[Status], dict[str, Array]]:
-    """N runs' ticks 0 … `n_ticks` through the one driver: one program mapped over the runs (`backend` "jax") or the
+    """N runs' ticks 0 … `grid.n` through the one driver: one program mapped over the runs (`backend` "jax") or the
     runs in lockstep in Python ("numpy", the reference). `traj`: one trajectory for every run or one per run; `z0`
     `(N, d)`; `lines` each run's delay line contents (None: no line). Returns the logged times, the states `(T, N, d)`,
     each run's logged count (a stopped run's rows after it repeat its last one), the statuses and the logged signals
@@ -339,20 +320,18 @@ def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory]
     carries = [tick.start(z0[i], None if lines is None else lines[i]) for i, tick in enumerate(ticks)]
     shared = not isinstance(traj, list)
     inputs, mapped = feed(ticks, traj if isinstance(traj, list) else [traj], shared)
-    trace = drive(ticks, carries, inputs, n_ticks, log_every, backend=backend, mapped=mapped, progress=progress)
+    trace = drive(ticks, carries, inputs, grid.n, grid.log_every, backend=backend, mapped=mapped, progress=progress)
     records = trace.records
-    T = records.z.shape[0]
-    return (opts.control_period * (log_every * np.arange(T)), records.z, trace.n_logged, trace.status,
-            ticks[0].logged(records))
+    return grid.times(records.z.shape[0]), records.z, trace.n_logged, trace.status, ticks[0].logged(records)
 
 
-def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, n_ticks: int, log_every: int,
-              max_state: float, progress: bool, line: DelayLine | None,
+def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, grid: Grid, max_state: float,
+              progress: bool, line: DelayLine | None,
               backend: str = "numpy") -> tuple[Array, Array, Status, dict[str, Array]]:
-    """Ticks 0 … `n_ticks` from t = 0, stepped by numpy (`backend` "numpy") or compiled by JAX ("jax"; the same tick,
+    """Ticks 0 … `grid.n` from t = 0, stepped by numpy (`backend` "numpy") or compiled by JAX ("jax"; the same tick,
     equal to round-off; `progress` is not shown); returns the logged (t, z), the status and the logged signals
     (:meth:`Tick.logged`). `line` gives the delay line's initial contents; it is not written. One run of
     :func:`integrate_batch`."""
-    t, z, _, status, logged = integrate_batch([loop], traj, np.asarray(z0)[None], opts, n_ticks, log_every, max_state,
-                                              progress, None if line is None else [line.buffer], backend)
+    t, z, _, status, logged = integrate_batch([loop], traj, np.asarray(z0)[None], opts, grid, max_state, progress,
+                                              None if line is None else [line.buffer], backend)
     return t, z[:, 0], status[0], {name: a[:, 0] for name, a in logged.items()}

@@ -15,12 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from ..controllers.base import Controller, HasDelayLine, NeedsAcceleration, Prepares
+from ..controllers.base import Law, as_law
+from ..grid import Grid
 from ..plant.plant import Plant, same_model
 from ..trajectories import Trajectory, traceable
 from ..validation import ConfigError, as_scalar, as_vector
+from .backends import Run, execute
 from .driver import drive
-from .integrators import RK4, Sampled, SolveIVP, check_plant_step, choose_backend, run_on
+from .integrators import RK4, Sampled, SolveIVP, check_plant_step
 from .loop import MAX_LOG_BYTES, ClosedLoop, DelayLine, Ring, RK4Step
 from .outputs import outputs
 from .result import SimulationResult
@@ -29,17 +31,17 @@ from .status import Status
 Array = Any
 
 
-def _fixed(loop: ClosedLoop, traj: Trajectory, z0: Array, dt: float, n_steps: int, log_every: int, max_state: float,
-           progress: bool, line: DelayLine | None, backend: str) -> tuple[Array, Array, Status]:
+def _fixed(loop: ClosedLoop, traj: Trajectory, z0: Array, grid: Grid, max_state: float, progress: bool,
+           line: DelayLine | None, backend: str) -> tuple[Array, Array, Status]:
     """Fixed-step RK4 from t = 0 through the one driver (:class:`~robotadapt.sim.loop.RK4Step`); returns logged (t, z)
     and the status. The log at t_k holds the state applied over step k (with a delay line, x as read from it); the last
     sample, at t_final, is logged, not integrated."""
     inside = backend == "c" and traceable(traj)  # the C program evaluates the reference itself
-    rk4 = RK4Step(loop, dt, max_state, traj if inside else None)
+    rk4 = RK4Step(loop, grid.h, max_state, traj if inside else None)
     carry = (z0, None if line is None else Ring.start(line.buffer))
-    trace = drive([rk4], [carry], rk4.feed(traj), n_steps, log_every, backend=backend, progress=progress)
+    trace = drive([rk4], [carry], rk4.feed(traj), grid.n, grid.log_every, backend=backend, progress=progress)
     z = trace.records[:, 0]
-    return dt * (log_every * np.arange(len(z))), z, trace.status[0]
+    return grid.times(len(z)), z, trace.status[0]
 
 
 def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
@@ -60,7 +62,7 @@ def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_
         return max_state - float(np.max(np.abs(y))) if np.all(np.isfinite(y)) else -1.0
 
     runaway.terminal = True  # type: ignore[attr-defined]
-    t_eval = opts.dt * np.arange(int(np.floor(t_final / opts.dt + 1e-9)) + 1)
+    t_eval = Grid(opts.dt, t_final).times()
     try:
         with np.errstate(all="ignore"):
             sol = solve_ivp(fun, (0.0, t_eval[-1]), z0, method=opts.method, t_eval=t_eval, rtol=opts.rtol,
@@ -99,7 +101,7 @@ def host_sampling(plant: Plant, integrator: RK4 | SolveIVP | Sampled) -> Sampled
         raise ConfigError("plant.timestep", exc.reason) from None
 
 
-def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajectory: Trajectory, *, t_final: float,
+def simulate(plant: Plant, controller: Law, trajectory: Trajectory, *, t_final: float,
              integrator: RK4 | SolveIVP | Sampled | None = None, q0: Any = None, dq0: Any = None, x0: Any = None,
              log_every: int = 1, max_state: float = 1e6, progress: bool = False,
              info: dict[str, Any] | None = None) -> SimulationResult:
@@ -142,6 +144,7 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     if not isinstance(log_every, int) or log_every < 1:
         raise ConfigError("simulation.log_every", f"must be a positive integer, got {log_every!r}")
     plant.check_state(q0)
+    controller = as_law(controller)
     sampled = isinstance(integrator, Sampled)
     if x0 is None:  # from what the law sees first: the sensor's tick-0 measurement in sampled time, else (q0, q̇0)
         seen = (plant.sensor.first_measurement(q0, dq0, integrator.control_period)
@@ -150,19 +153,19 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
     x0 = np.asarray(x0, dtype=float)
     check_plant_step(plant, integrator)
     h = integrator.control_period if isinstance(integrator, Sampled) else integrator.dt
-    if isinstance(controller, Prepares):
-        try:
-            controller = controller.prepare(trajectory, h, t_final)
-        except ConfigError as exc:  # sampled, the controller's step is the control period
-            if not sampled or exc.field != "simulation.dt":
-                raise
-            raise ConfigError("simulation.control_period", f"{exc.reason} (the controller's step here is the "
-                              "control period)") from None
+    try:
+        controller = controller.prepare(trajectory, h, t_final)
+    except ConfigError as exc:  # sampled, the controller's step is the control period
+        if not sampled or exc.field != "simulation.dt":
+            raise
+        raise ConfigError("simulation.control_period", f"{exc.reason} (the controller's step here is the "
+                          "control period)") from None
     line = None
-    if isinstance(controller, HasDelayLine):
+    buffer = controller.delay_line(h, q0, dq0)
+    if buffer is not None:
         if isinstance(integrator, SolveIVP):
             raise ConfigError("simulation.method", "a controller with a delay line (repetitive) needs method = 'rk4'")
-        line = DelayLine(np.array(controller.delay_line(h, q0, dq0), dtype=float))
+        line = DelayLine(np.array(buffer, dtype=float))
     loop = ClosedLoop(plant, controller, n, monitored=True)
     z0 = loop.start(plant.initial_state(q0, dq0), x0)
     info, effects = dict(info or {}), plant.describe()
@@ -182,28 +185,28 @@ def simulate(plant: Plant, controller: Controller | NeedsAcceleration, trajector
             t, z, status = _solve_ivp(loop, trajectory, z0, integrator, t_final, max_state)
         info["backend"] = integrator.backend.replace("auto", "numpy")
     else:
-        n_steps = int(np.ceil(t_final / h - 1e-9))
+        grid = Grid(h, t_final, log_every)
+        n_steps = grid.n
         width = z0.size + (4 * n if sampled else 0)
         log_bytes = 8.0 * (n_steps // log_every + 1) * width
         if log_bytes > MAX_LOG_BYTES:
             name = "simulation.control_period" if sampled else "simulation.dt"
             raise ConfigError(name, f"{n_steps:.3g} steps would keep a {log_bytes / 1e9:.3g} GB log; "
                               f"use a larger {name.split('.')[1]} or simulation.log_every")
-        backend = choose_backend(integrator.backend, n_steps, plant.model.traceable and controller.model.traceable,
-                                 single=True)
+        step = RK4Step(loop, h, max_state)  # a step of the loop: what the backends are asked about (sampled runs too)
+        asked = Run(step, step.start(z0, None if line is None else line.buffer), step.feed(trajectory), n_steps,
+                    single=True, traceable=plant.model.traceable and controller.model.traceable)
 
         def run(backend: str) -> tuple[Array, Array, Status, dict[str, Array] | None]:
             if isinstance(integrator, Sampled):
                 from .sampled import integrate
 
-                return integrate(loop, trajectory, z0, integrator, n_steps, log_every, max_state, progress, line,
-                                 backend=backend)
-            return (*_fixed(loop, trajectory, z0, integrator.dt, n_steps, log_every, max_state, progress, line,
-                            backend), None)
+                return integrate(loop, trajectory, z0, integrator, grid, max_state, progress, line, backend=backend)
+            return (*_fixed(loop, trajectory, z0, grid, max_state, progress, line, backend), None)
 
         if isinstance(integrator, Sampled):
             info["sampling"] = integrator.describe()
-        (t, z, status, logged), backend = run_on(integrator.backend, backend, run)
+        (t, z, status, logged), backend = execute(integrator.backend, asked, run)
         info["backend"] = backend
     wall = time.perf_counter() - wall
     with np.errstate(all="ignore"):  # a diverged run's last samples may overflow in the recomputed outputs

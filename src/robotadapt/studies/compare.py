@@ -44,7 +44,7 @@ import numpy as np
 
 from ..analysis.metrics import metrics
 from ..analysis.monitors import convergence_time
-from ..controllers.base import HasDelayLine
+from ..grid import Grid
 from ..robots.base import RobotModel
 from ..robots.two_link import TwoLinkArm
 from ..sim.integrators import Sampled, SolveIVP
@@ -405,7 +405,7 @@ def _row(entry: Entry, progress: bool) -> Row:
     s = entry.scenario.setup
     h = s.integrator.control_period if isinstance(s.integrator, Sampled) else s.integrator.dt
     finished = res.ok and float(res.t[-1]) > s.t_final - s.log_every * h * (1 + 1e-9)
-    steps = max(round(s.t_final / s.integrator.dt), 1)
+    steps = max(Grid.of(s.integrator, s.t_final).n, 1)
     e_norm = np.linalg.norm(res.e, axis=-1)
     summary = {
         "controller": entry.name, "label": entry.label, "source": entry.source, "reference": entry.reference,
@@ -481,7 +481,7 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
         try:
             loop = closed_loop(entry.scenario)
             period = getattr(loop.controller, "period", None)  # a learning law's (its delay line's)
-            if isinstance(loop.controller, HasDelayLine) and period is not None and entry.scenario.setup.t_final <= period:
+            if loop.controller.has("delay_line") and period is not None and entry.scenario.setup.t_final <= period:
                 raise ConfigError("simulation.t_final", f"{entry.scenario.setup.t_final:g} s is within one period T = "
                                   f"{period:.4g} s: the law learns nothing (û_d(t − T) = 0 throughout)")
             fields = tunable(entry.scenario)

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..robots.base import RobotModel
 from ..robots.identifiability import base_parameters
-from ..sim.compiled import float64, jax_module
+from ..tracing import float64, jax_module
 from ..trajectories import SumOfSines, Trajectory, fourier
 from ..validation import ConfigError
 

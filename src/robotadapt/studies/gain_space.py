@@ -9,15 +9,15 @@ diagonal (Cholesky): every θ gives a symmetric positive definite gain, and L-BF
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, is_dataclass
+from dataclasses import dataclass, fields, is_dataclass
 from functools import reduce
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from .. import pytree
 from ..analysis.metrics import OBJECTIVES
-from ..sim.compiled import jax_module, skeleton
-from ..sim.gradient import replace_at
+from ..tracing import jax_module
 from ..validation import ConfigError
 from .scenarios import Scenario
 from .scenarios.build import setup
@@ -145,23 +145,20 @@ def _form(value: Any, field_name: str) -> str:
 
 
 def _comparable(controller: Any, path: tuple[str, ...]) -> tuple[Any, list[Array]]:
-    """A fresh controller (with the constants it derived at construction) less its model and the gain at `path`, as
-    skeleton + leaves: two builds that differ only in that gain compare equal unless the law derives other constants
-    from it — other than those it lists in `derived`, which it computes from a traced gain itself (adaptive computed
-    torque's Lyapunov pair)."""
+    """A fresh controller less its models and the gain at `path`, as (structure, leaves) of its fields
+    (:func:`robotadapt.pytree.flatten` without the derived constants, which a traced gain recomputes): two builds that
+    differ only in that gain compare equal unless the law derives other fields from it at construction."""
 
     def blank(obj: Any, at: tuple[str, ...]) -> Any:
         if is_dataclass(obj) and not isinstance(obj, type):
-            new = copy.copy(obj)
-            derived = getattr(type(obj), "derived", ())  # recomputed from a traced gain by the law itself
-            for key, value in vars(obj).items():
-                inner = value if key == "model" else blank(value, at[1:] if at[:1] == (key,) else ())
-                object.__setattr__(new, key, None if at == (key,) or key in ("model", *derived) else inner)
-            return new
+            for f in fields(obj):
+                inner = at[1:] if at[:1] == (f.name,) else ()
+                value = None if at == (f.name,) or f.name == "model" else blank(getattr(obj, f.name), inner)
+                obj = pytree.replace(obj, (f.name,), value)
         return obj
 
-    leaves: list[Array] = []
-    return skeleton(blank(controller, path), leaves), leaves
+    leaves, structure = pytree.flatten(blank(controller, path), with_derived=False)
+    return structure, leaves
 
 
 def locate(scenario: Scenario, spec: str) -> Gain:
@@ -182,7 +179,7 @@ def locate(scenario: Scenario, spec: str) -> Gain:
     if why:
         raise ConfigError(name, why)
     attr = getattr(owner, parts[-1], None)
-    if not (isinstance(attr, float) or (isinstance(attr, np.ndarray) and attr.ndim == 2)):
+    if not (isinstance(attr, float) or (isinstance(attr, np.ndarray) and attr.ndim in (0, 2))):
         raise ConfigError(name, "is not a gain the law holds as a number or a matrix")
     if not (np.all(np.linalg.eigvalsh(np.atleast_2d(attr)) > 0)):
         raise ConfigError(name, f"is not positive definite ({value!r}): only positive gains are tuned")
@@ -213,7 +210,7 @@ def _checked(scenario: Scenario, gain: Gain, value: Any) -> Gain:
     s, ctrl = scenario.setup, scenario.setup.controller
 
     def x0(g: Array) -> Array:
-        return np.asarray(replace_at(ctrl, gain.path[1:], g).initial_state(s.q0, s.dq0), dtype=float)
+        return np.asarray(pytree.replace(ctrl, gain.path[1:], g).initial_state(s.q0, s.dq0), dtype=float)
 
     base, flat = x0(gain.initial), np.asarray(gain.initial, dtype=float).reshape(-1)
 

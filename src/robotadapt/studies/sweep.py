@@ -36,6 +36,7 @@ import numpy as np
 
 from ..analysis.metrics import metrics
 from ..files import atomic_write, writable_dir
+from ..grid import Grid
 from ..sim.batch import NotBatchable, simulate_batch
 from ..sim.simulation import RK4, Sampled, simulate
 from ..validation import ConfigError, as_array
@@ -170,12 +171,9 @@ def make_sweep(scenario: Scenario, grid: Sequence[str] = (), random: Sequence[st
 def log_every(s: Setup) -> int:
     """Steps (control ticks, sampled-data) between logged states: at least the scenario's own, at most `LOG_SAMPLES`
     samples, and a divisor of the step count where one is close (so t_final is logged)."""
-    if isinstance(s.integrator, Sampled):
-        steps = math.ceil(s.t_final / s.integrator.control_period - 1e-9)
-    elif isinstance(s.integrator, RK4):
-        steps = math.ceil(s.t_final / s.integrator.dt - 1e-9)
-    else:
+    if not isinstance(s.integrator, Sampled | RK4):
         return s.log_every
+    steps = Grid.of(s.integrator, s.t_final).n
     least = max(s.log_every, math.ceil(steps / LOG_SAMPLES))
     return next((k for k in range(least, 2 * least + 1) if steps % k == 0), least)
 
@@ -342,7 +340,7 @@ def _executor(workers: int, scheduler: str | None) -> Iterator[tuple[int, Callab
 def chunk_size(pending: int, slots: int, s: Setup) -> int:
     """Runs per chunk: the pending runs spread over the slots, at most `MAX_CHUNK`, and at least enough for
     `MIN_CHUNK_SECONDS` of work (a chunk costs at least its step count times `STEP_SECONDS`)."""
-    steps = math.ceil(s.t_final / s.integrator.dt)
+    steps = Grid.of(s.integrator, s.t_final).n
     least = math.ceil(MIN_CHUNK_SECONDS / (steps * STEP_SECONDS))
     return max(1, min(MAX_CHUNK, max(least, math.ceil(pending / slots))))
 

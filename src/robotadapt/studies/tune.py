@@ -26,13 +26,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from .. import pytree
 from ..analysis.metrics import OBJECTIVES, metrics, objective_terms
-from ..controllers.base import Prepares
 from ..plant.mujoco import MujocoPlant
-from ..sim.compiled import float64, jax_module
-from ..sim.gradient import Rollout, check_differentiable, replace_at
+from ..sim.gradient import Rollout, check_differentiable
 from ..sim.integrators import RK4, Sampled
 from ..sim.loop import ClosedLoop
+from ..tracing import float64, jax_module
 from ..validation import ConfigError
 from .gain_space import Gain, Objective, draw_over, locate, parse_objective, split, tuned_scenario
 from .scenarios import Scenario
@@ -74,8 +74,7 @@ def closed_loop(scenario: Scenario) -> ClosedLoop:
                           "'robotadapt', then check the gains on MuJoCo")
     ctrl = s.controller
     h = s.integrator.control_period if isinstance(s.integrator, Sampled) else s.integrator.dt
-    if isinstance(ctrl, Prepares):
-        ctrl = ctrl.prepare(s.trajectory, h, s.t_final)
+    ctrl = ctrl.prepare(s.trajectory, h, s.t_final)
     loop = ClosedLoop(s.plant, ctrl, s.plant.model.n)
     check_differentiable(loop)
     return loop
@@ -96,7 +95,7 @@ def smoothed(loop: ClosedLoop, parts: list[tuple[str, ...]], width: Any) -> Clos
     for part in parts:
         path = ("controller",) + part
         component: Any = reduce(getattr, path, loop)
-        loop = replace_at(loop, path, replace_at(component.surrogate(1.0), ("width",), width))
+        loop = pytree.replace(loop, path, pytree.replace(component.surrogate(1.0), ("width",), width))
     return loop
 
 
@@ -145,13 +144,13 @@ class Problem:
         """The objective terms of one run with the gains of θ and the true φ (traced), |τ_i(t_k)|/T at every sample and
         whether the run stayed finite and within `max_state`; a switching law's surrogate of `width` when given."""
         jnp = jax_module().numpy
-        loop = replace_at(self.loop, ("plant", "phi"), phi)
+        loop = pytree.replace(self.loop, ("plant", "phi"), phi)
         if width is not None and self.switching:
             loop = smoothed(loop, self.switching, width)
         x0 = jnp.asarray(self.x0)
         for gain, part in zip(self.gains, split(self.gains, theta), strict=True):
             g = gain.gain(part)
-            loop = replace_at(loop, gain.path, g)
+            loop = pytree.replace(loop, gain.path, g)
             if gain.x0_jacobian is not None:
                 x0 = x0 + gain.x0_jacobian @ (jnp.reshape(g, (-1,)) - np.reshape(gain.initial, (-1,)))
         t, e, tau, z = self.rollout.signals(loop, self.trajectory, jnp.concatenate([jnp.asarray(self.s0), x0]))
@@ -227,7 +226,7 @@ class Problem:
 
 def _rebuilt(obj: Any, path: tuple[str, ...], value: Any) -> Any:
     """`obj` with the field at `path` set to `value` by `dataclasses.replace` along the path: constructed again, so
-    with the law's checks (a ConfigError), unlike :func:`~robotadapt.sim.gradient.replace_at`."""
+    with the law's checks (a ConfigError), unlike :func:`~robotadapt.pytree.replace`."""
     inner = value if len(path) == 1 else _rebuilt(getattr(obj, path[0]), path[1:], value)
     return replace(obj, **{path[0]: inner})
 

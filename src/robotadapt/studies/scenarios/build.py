@@ -171,7 +171,7 @@ def _signature(ctor: Callable[..., Any], first: str | None) -> dict[str, Any]:
     if is_dataclass(ctor):
         names = {f.name: f.default if f.default is not MISSING else
                  f.default_factory() if f.default_factory is not MISSING else REQUIRED
-                 for f in fields(ctor) if not f.metadata.get("internal")}
+                 for f in fields(ctor) if f.init and not f.metadata.get("internal")}
     else:
         sig = inspect.signature(ctor)
         names = {k: p.default for k, p in sig.parameters.items()}
