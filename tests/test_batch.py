@@ -19,7 +19,7 @@ from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
 from robotadapt.robots import TwoLinkArm
 from robotadapt.sim import RK4, SolveIVP, simulate
-from robotadapt.sim.batch import PER_RUN, NotBatchable, simulate_batch, stack
+from robotadapt.sim.batch import NotBatchable, simulate_batch, stack
 from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import sinusoid
 from robotadapt.validation import ConfigError
@@ -106,7 +106,7 @@ SCENARIOS = {  # packaged scenarios, one per controller family; overrides keep t
 
 @pytest.mark.parametrize("name", list(SCENARIOS))
 def test_every_controller_family_batches_over_plant_parameters_and_initial_states(name):
-    """Per run: true φ (±20 %), q0, and φ̂(0) where the controller class lists it in PER_RUN."""
+    """Per run: true φ (±20 %), q0, and φ̂(0) where the controller class lists it in its per_run."""
     s = load(name, SCENARIOS[name]).setup
     N, dt = 3, s.integrator.dt
     t_final = 150 * dt
@@ -114,7 +114,7 @@ def test_every_controller_family_batches_over_plant_parameters_and_initial_state
     plants = [Plant(s.plant.model, s.plant.phi * k, s.plant.disturbance) for k in scale]
     q0 = s.q0 + 0.05 * np.arange(N)[:, None]
     ctrls = [s.controller] * N
-    if "phi_hat0" in PER_RUN.get(type(s.controller), ()):
+    if "phi_hat0" in type(s.controller).per_run:
         ctrls = [dataclasses.replace(s.controller, phi_hat0=s.controller.phi_hat0 * k) for k in scale]
     batch = simulate_batch(plants, ctrls, s.trajectory, t_final=t_final, integrator=s.integrator, q0=q0, dq0=s.dq0,
                            log_every=10)

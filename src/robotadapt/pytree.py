@@ -34,7 +34,7 @@ import sys
 from collections.abc import Iterable, Iterator
 from dataclasses import Field, field, fields, is_dataclass
 from functools import cache, cached_property
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -51,6 +51,10 @@ class derived(cached_property[Any]):  # noqa: N801 (a decorator, as cached_prope
 class Module:
     """Base of the package's frozen dataclasses that programs take as arguments (module docstring). A subclass is a
     pytree by being one; a user's law deriving from :class:`~robotadapt.controllers.base.Law` is one too."""
+
+    #: the fields whose math broadcasts over a leading run axis: runs that differ in them (and in nothing else) step as
+    #: one vectorized loop (robotadapt.sim.batch.stack), each declared by its class and checked in tests/test_batch.py
+    per_run: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)

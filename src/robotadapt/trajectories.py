@@ -7,7 +7,7 @@ All are frozen dataclasses with per-joint vectors fixed at construction (use :fu
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, NamedTuple, Protocol
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
@@ -49,6 +49,8 @@ class SumOfSines(Module):
     `amplitude` and `phase` have shape `(k, n)`, `omega` shape `(k,)` or `(k, n)`, `offset` shape `(n,)`.
     `period` is 2π/ω for a single frequency and the common period of commensurate frequencies, else None.
     """
+
+    per_run: ClassVar[tuple[str, ...]] = ("amplitude", "omega", "phase", "offset")  # varies per run in one vectorized batch
 
     amplitude: Array
     omega: Array

@@ -4,7 +4,7 @@ error together."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -42,6 +42,8 @@ class Composite(Law):
     State x = [φ̂ (p), P (p×p, row-major), τ_f (n), Z3 (n×p, row-major)]. `a` > 0 is the filter pole (1/s); `P0` a
     symmetric positive definite p×p gain (scalar → k·I, list → diagonal, or a matrix); `Lam`, `Kv` as for Slotine–Li.
     """
+
+    per_run: ClassVar[tuple[str, ...]] = ("phi_hat0",)  # varies per run in one vectorized batch
 
     model: RobotModel
     Lam: Any

@@ -62,6 +62,8 @@ class AdaptiveComputedTorque(EstimateState):
         (det M̂ = m̂2 l1² l2² (m̂1 + m̂2 s2²)) and the polar arm (M̂ = diag(m̂ r², m̂), r ≠ 0).
     """
 
+    per_run: ClassVar[tuple[str, ...]] = ("phi_hat0",)  # varies per run in one vectorized batch
+
     needs_acceleration: ClassVar[bool] = True  # the update reads the measured q̈ (6.2.19)
 
     model: RobotModel

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -52,6 +52,8 @@ class DCAL(EstimateState):
     (7.2.22), (7.2.25), (7.2.26) hold. `k_v, k_p, k_a` are scalars, as in the book's analysis. `adaptation = "natural"`
     with `gamma`: the natural law on b = Y_dᵀ r, its divergence in V (docs/natural.md).
     """
+
+    per_run: ClassVar[tuple[str, ...]] = ("phi_hat0",)  # varies per run in one vectorized batch
 
     model: RobotModel
     Kv: Any

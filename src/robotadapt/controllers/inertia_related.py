@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from ..arrays import matvec
 from ..robots.base import RobotModel
@@ -24,6 +24,8 @@ class InertiaRelated(EstimateState):
     symmetric positive definite matrix. With `adaptation = "natural"` and the scalar `gamma`, the update is the natural
     adaptive law dĴᵢ/dt = Ĵᵢ Bᵢ Ĵᵢ / γ on b = Yᵀr and V's parameter term γ Σ D(Jᵢ‖Ĵᵢ) (docs/natural.md): the same dV/dt.
     """
+
+    per_run: ClassVar[tuple[str, ...]] = ("Lam", "Kv", "Gamma", "phi_hat0")  # varies per run in one vectorized batch
 
     model: RobotModel
     Lam: Any

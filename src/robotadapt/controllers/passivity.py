@@ -19,7 +19,7 @@ them, so `robotadapt tune` varies the gains themselves. The update law is any pa
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -186,6 +186,8 @@ class PassivityBased(Law):
     `phi_hat(x)` is the estimate at y = 0: φ̂ itself for the gradient and σ laws, but only the integral part φ̂_I for
     the PI law, whose φ̂ = φ̂_I + F_p Zᵀ r also depends on (q, q̇, q_d, ...): :meth:`phi_hat_at` gives the full φ̂.
     """
+
+    per_run: ClassVar[tuple[str, ...]] = ("phi_hat0",)  # varies per run in one vectorized batch
 
     model: RobotModel
     servo: Servo

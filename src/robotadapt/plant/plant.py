@@ -34,6 +34,8 @@ Disturbance = Callable[[Array, Array, Array], Array]
 class SinusoidalDisturbance(Module):
     """T_d,i(t) = A_i sin(ω t + φ_i) + b_i (Example 6.7.1 uses A = 2, ω = 10 rad/s on both joints)."""
 
+    per_run: ClassVar[tuple[str, ...]] = ("amplitude", "phase", "bias")  # varies per run in one vectorized batch
+
     amplitude: Array
     omega: float
     phase: Array
@@ -63,6 +65,8 @@ class Plant(Module):
     """`model` with the true parameters `phi` and an optional disturbance `T_d(t, q, q̇)` (torques, shape `(..., n)`);
     optionally a `payload` (φ in `model`'s parameterization changes when it is attached), `elastic_joint`s, a `motor`
     per joint, an `actuator` (limits, delay) and a `sensor` (the measurement path, sampled-data mode only)."""
+
+    per_run: ClassVar[tuple[str, ...]] = ("phi",)  # varies per run in one vectorized batch
 
     model: RobotModel
     phi: Any

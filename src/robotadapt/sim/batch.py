@@ -5,7 +5,7 @@ Each of plant, controller and trajectory is one object shared by every run or a 
 each validated when it was constructed. A sequence is merged into one object of the same class whose fields that
 differ between runs are stacked along a leading axis (:func:`stack`); models and controllers broadcast over it, so the
 step is the very code :func:`~robotadapt.sim.simulate` runs. A field may differ only where the class's math
-broadcasts it (`PER_RUN`); anything else raises :class:`NotBatchable` (simulate those runs one by one).
+broadcasts it (the class's `per_run`); anything else raises :class:`NotBatchable` (simulate those runs one by one).
 
 Per run: a run whose state becomes non-finite or exceeds `max_state`, or whose law's guard fails, stops there with its
 own status and partial record; the others go on (the one driver, :mod:`robotadapt.sim.driver`). States are logged every
@@ -14,19 +14,17 @@ are recomputed per run on demand by the same code as `simulate`, whose results a
 
 from __future__ import annotations
 
-import copy
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, is_dataclass
-from functools import cached_property
 from typing import Any, TypeVar
 
 import numpy as np
 
-from ..controllers import DCAL, AdaptiveComputedTorque, Composite, InertiaRelated, PassivityBased
+from .. import pytree
 from ..grid import Grid
-from ..plant.plant import Plant, SinusoidalDisturbance
-from ..trajectories import SumOfSines
+from ..plant.plant import Plant
+from ..pytree import Module
 from ..validation import ConfigError, as_array, as_scalar, as_vector
 from .backends import Run, execute
 from .driver import drive
@@ -38,21 +36,6 @@ from .status import Status
 
 Array = Any
 T = TypeVar("T")
-
-# Fields that may differ between the runs of one batch: the class's math broadcasts them over a leading run axis
-# (`phi_hat0` is read only by `initial_state`, which the batch calls per run). Each entry is checked against single
-# runs in tests/test_batch.py.
-PER_RUN: dict[type, tuple[str, ...]] = {
-    Plant: ("phi",),
-    SinusoidalDisturbance: ("amplitude", "phase", "bias"),
-    SumOfSines: ("amplitude", "omega", "phase", "offset"),
-    InertiaRelated: ("Lam", "Kv", "Gamma", "phi_hat0"),
-    AdaptiveComputedTorque: ("phi_hat0",),
-    Composite: ("phi_hat0",),
-    DCAL: ("phi_hat0",),
-    PassivityBased: ("phi_hat0",),
-}
-
 
 class NotBatchable(ConfigError):
     """The runs differ in something one vectorized loop cannot carry; simulate them one by one."""
@@ -76,10 +59,12 @@ def _same(a: Any, b: Any) -> bool:
 
 def stack(items: Sequence[T], name: str) -> T:
     """One object of the items' class whose fields that differ between the items are stacked along a new leading axis
-    (nested dataclasses field by field). Raises :class:`NotBatchable` unless every differing field is in `PER_RUN`.
+    (nested dataclasses field by field). Raises :class:`NotBatchable` unless every differing field is one the class
+    declares `per_run` (:class:`robotadapt.pytree.Module`: its math broadcasts over a leading run axis; `phi_hat0` is
+    read only by `initial_state`, which the batch calls per run).
 
-    The items were validated when constructed; the merged object is not constructed again (its cached derived
-    constants are dropped, to be recomputed from the stacked fields).
+    The items were validated when constructed; the merged object is not constructed again (its derived constants are
+    dropped, to be recomputed from the stacked fields: :func:`robotadapt.pytree.replace`).
     """
     first = items[0]
     if all(item is first for item in items):
@@ -88,6 +73,7 @@ def stack(items: Sequence[T], name: str) -> T:
     if any(type(item) is not cls for item in items) or not is_dataclass(first):
         raise NotBatchable(name, f"the runs mix {', '.join(sorted({type(i).__name__ for i in items}))}; one batch "
                            "runs one kind")
+    allowed = cls.per_run if isinstance(first, Module) else ()
     changes = {}
     for f in fields(first):
         values = [getattr(item, f.name) for item in items]
@@ -95,23 +81,18 @@ def stack(items: Sequence[T], name: str) -> T:
             continue
         if is_dataclass(values[0]):
             changes[f.name] = stack(values, f"{name}.{f.name}")
-        elif f.name in PER_RUN.get(cls, ()):
+        elif f.name in allowed:
             arrays = [np.asarray(v, dtype=float) for v in values]
             if any(a.shape != arrays[0].shape for a in arrays):
                 raise NotBatchable(f"{name}.{f.name}", "has different shapes in different runs")
             changes[f.name] = np.stack(arrays)
         else:
-            allowed = PER_RUN.get(cls, ())
             raise NotBatchable(f"{name}.{f.name}", f"differs between runs; in one batch {cls.__name__} varies only "
                                f"{', '.join(allowed)} per run" if allowed else
                                f"differs between runs; one batch holds one {cls.__name__}")
-    out = copy.copy(first)
-    for klass in cls.__mro__:
-        for key, attr in vars(klass).items():
-            if isinstance(attr, cached_property):
-                vars(out).pop(key, None)
+    out = first
     for key, value in changes.items():
-        object.__setattr__(out, key, value)
+        out = pytree.replace(out, (key,), value)
     return out
 
 
@@ -165,7 +146,7 @@ class BatchResult:
         try:
             loop = ClosedLoop(stack(self.plants, "plant"), stack(self.controllers, "controller"),
                               self.plants[0].model.n, monitored=True)
-        except NotBatchable:  # sampled-data runs may differ in more than PER_RUN: their outputs run by run
+        except NotBatchable:  # sampled-data runs may differ in more than `per_run`: their outputs run by run
             return [self.run(i) for i in range(N)]
         with np.errstate(all="ignore"):
             return batch_outputs(loop, self.controllers, stack(self.trajectories, "trajectory"), self.t, self.z,
@@ -248,7 +229,7 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
     """Simulate N closed loops from t = 0 to `t_final` (s) with fixed-step RK4, all in one vectorized loop.
 
     `plant`, `controller`, `trajectory`: one object for every run, or a list of N (one per run; what may differ between
-    them is listed in `PER_RUN`). `q0, dq0`: shape `(n,)` or `(N, n)`, default zero; `x0`: `(s,)` or `(N, s)`, default
+    them is each class's `per_run`). `q0, dq0`: shape `(n,)` or `(N, n)`, default zero; `x0`: `(s,)` or `(N, s)`, default
     each run's `controller.initial_state(q0, dq0)`. N is the common length of the per-run arguments. Logging, the
     divergence guard and the statuses are those of :func:`~robotadapt.sim.simulate`, per run.
 
