@@ -194,13 +194,14 @@ def _peak_bytes(N: int, steps: int, log_every: int) -> tuple[int, object]:
 
 def test_log_every_bounds_memory():
     """The log holds steps/log_every + 1 samples per run; four times the steps at four times log_every keeps the same
-    peak memory, a small fraction of a per-step record of 400 runs × 400 steps (7.7 MB)."""
+    peak memory, a small fraction of a per-step record of 400 runs × 400 steps (7.7 MB): the log, the carry and the
+    metrics folded at every step (robotadapt.sim.running: a step's sample and the runs' sums, about 0.15 MB here)."""
     _peak_bytes(400, 10, 10)  # first-call allocations (caches) out of the way
     short, res = _peak_bytes(400, 100, 10)
     long, res_long = _peak_bytes(400, 400, 40)
     assert res.z.shape == res_long.z.shape == (11, 400, 8)
     assert long < 1.2 * short, (short, long)
-    assert long < 0.8e6
+    assert long < 1.2e6
     with pytest.raises(ConfigError, match=r"^simulation\.log_every: .* GB log"):
         simulate_batch(Plant(ARM, PHI), slotine_li(), sinusoid(2), t_final=1000.0, q0=np.zeros((10_000, 2)))
 

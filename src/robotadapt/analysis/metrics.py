@@ -140,6 +140,11 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
     (:func:`robotadapt.robots.consistency.consistency_metrics`). With the controller's `model`, when its dynamics see
     fewer combinations than its parameters (an n-DOF arm),
     also the base-parameter keys of :func:`base_metrics`.
+
+    A fixed-step run folds its error and torque metrics at every step or tick (`res.running`,
+    :mod:`robotadapt.sim.running`): `rms_error`, `rms_error_norm`, `ise`, `control_energy`, `max_abs_error`,
+    `max_abs_torque`, `max_abs_commanded_torque`, `saturated_fraction` and `convergence_time` are then those of every
+    instant of the run grid, whatever `simulation.log_every` (the logged samples give the same numbers at log_every = 1).
     """
     e, t, tau = res.e, res.t, res.tau
     terms = {k: float(v) for k, v in objective_terms(t, e, tau).items()}
@@ -184,4 +189,5 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
     from .monitors import monitor_metrics
 
     out.update(monitor_metrics(res, res.monitors))
+    out.update({k: v for k, v in (res.running or {}).items() if k in out})  # every step's, not the logged samples'
     return out

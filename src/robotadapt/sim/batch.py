@@ -26,6 +26,7 @@ from ..grid import Grid
 from ..plant.plant import Plant
 from ..pytree import Module
 from ..validation import ConfigError, as_array, as_scalar, as_vector
+from . import running
 from .backends import Run, execute
 from .driver import drive
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step
@@ -114,6 +115,8 @@ class BatchResult:
     wall_time: float
     info: dict[str, Any]
     logged: dict[str, Array] | None = None  # sampled-data runs: the signals the ticks logged, `(T, N, n)` each
+    folded: running.Running | None = None  # the runs' metrics folded at every step (robotadapt.sim.running), run axis
+    h: float = 0.0  # the grid's step (dt, or the control period): what the folded integrals are summed with
 
     def __len__(self) -> int:
         return int(self.z.shape[1])
@@ -127,6 +130,9 @@ class BatchResult:
         plant = self.plants[i]
         return {**self.info, "run": i} | ({"plant": plant.describe()} if plant.describe() else {})
 
+    def _folded(self, i: int) -> dict[str, Any] | None:
+        return None if self.folded is None else running.values(running.run(self.folded, i), self.h)
+
     def run(self, i: int) -> SimulationResult:
         """Run `i` as a :class:`~robotadapt.sim.result.SimulationResult` (outputs recomputed as `simulate` does)."""
         i = range(len(self))[i]
@@ -134,7 +140,8 @@ class BatchResult:
         with np.errstate(all="ignore"):
             logged = None if self.logged is None else {name: a[:k, i] for name, a in self.logged.items()}
             return outputs(ClosedLoop(plant, self.controllers[i], plant.model.n, monitored=True), self.trajectories[i],
-                           self.t[:k], self.z[:k, i], self.status[i], self.wall_time / len(self), self._info(i), logged)
+                           self.t[:k], self.z[:k, i], self.status[i], self.wall_time / len(self), self._info(i), logged,
+                           self._folded(i))
 
     def runs(self) -> list[SimulationResult]:
         """Every run's record, equal to `[self.run(i) for i in range(N)]`; their outputs computed together, by the
@@ -150,7 +157,8 @@ class BatchResult:
             return [self.run(i) for i in range(N)]
         with np.errstate(all="ignore"):
             return batch_outputs(loop, self.controllers, stack(self.trajectories, "trajectory"), self.t, self.z,
-                                 self.status, self.wall_time / N, [self._info(i) for i in range(N)], self.logged)
+                                 self.status, self.wall_time / N, [self._info(i) for i in range(N)], self.logged,
+                                 [self._folded(i) for i in range(N)])
 
 
 
@@ -285,9 +293,10 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
                      progress=progress)
 
     trace, _ = execute(integrator.backend, asked, run)
-    z = trace.records
+    z = trace.records.z
     return BatchResult(grid.times(len(z)), z, trace.n_logged, tuple(trace.status), runs.plants,
-                       controllers, runs.trajectories, time.perf_counter() - wall, dict(info or {}))
+                       controllers, runs.trajectories, time.perf_counter() - wall, dict(info or {}), folded=trace.running,
+                       h=grid.h)
 
 
 def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, max_state: float, progress: bool,
@@ -321,7 +330,7 @@ def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, m
                 n_ticks * N, traceable=traceable)
     wall = time.perf_counter()
     try:
-        (t, z, n_logged, status, logged), backend = execute(
+        (t, z, n_logged, status, folded, logged), backend = execute(
             opts.backend, asked, lambda b: integrate_batch(loops, traj, z0, opts, grid, max_state, progress, lines, b))
     except ConfigError as exc:
         if exc.field == "simulation":
@@ -329,7 +338,7 @@ def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, m
         raise
     info = {**info, "sampling": opts.describe(), "backend": backend}
     return BatchResult(t, z, n_logged, tuple(status), runs.plants, controllers, runs.trajectories,
-                       time.perf_counter() - wall, info, logged)
+                       time.perf_counter() - wall, info, logged, folded, grid.h)
 
 
 def _prepared(controllers: tuple[Any, ...], trajectories: tuple[Any, ...], dt: float, t_final: float) -> tuple[Any, ...]:

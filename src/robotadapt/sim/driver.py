@@ -33,6 +33,7 @@ from .. import pytree
 from ..arrays import array_namespace
 from ..tracing import PROGRAMS, float64, jax_module
 from ..validation import ConfigError
+from . import running
 from .status import Status
 
 Array = Any
@@ -79,6 +80,7 @@ class Trace:
     records: Any
     n_logged: Array
     status: list[Status]
+    running: running.Running  # each run's metrics folded at every step (robotadapt.sim.running), run axis first
 
 
 def map_tree(fn: Callable[..., Any], tree: Any, *rest: Any) -> Any:
@@ -120,10 +122,10 @@ def take_run(inputs: Any, i: int, mapped: Any) -> Any:
 
 
 def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, log_every: int,
-            progress: bool) -> tuple[Any, Array, Array, Array, Any]:
+            progress: bool) -> tuple[Any, Array, Array, Array, Any, running.Running]:
     """The Python loop over steps: (the logged records `(T, ...)`, whether each is valid, the stop step, the stop code,
-    the verdicts' `bad`). `lanes`: one (transition, carry), a single run or the runs on its leading axes, or one per run
-    (mapped), stepped in lockstep so that each chunk of inputs is fed once."""
+    the verdicts' `bad`, the running metrics). `lanes`: one (transition, carry), a single run or the runs on its leading
+    axes, or one per run (mapped), stepped in lockstep so that each chunk of inputs is fed once."""
     from tqdm import tqdm
 
     one = len(lanes) == 1
@@ -133,6 +135,7 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
     logs: list[Any] = [None] * len(lanes)
     valid, T = np.zeros((n // log_every + 1,) + shape, bool), 0
     carries = [carry for _, carry in lanes]
+    accs = [running.start(np, shape if one else (), transition.loop.n) for transition, _ in lanes]
     quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
     with tqdm(total=n + 1, delay=1.0, disable=quiet, unit="step", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
@@ -148,6 +151,8 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
                         continue
                     new, record, verdict = transition(carries[i], map_tree(lambda a: a[j], rows[i]))  # noqa: B023
                     now, code, ok = _judge(alive[lane], k, n, verdict)
+                    accs[i] = running.fold(accs[i], record.sample, k, ok)
+                    record = record._replace(sample=None)
                     if k % log_every == 0:  # into a log allocated once, at the first record
                         if logs[i] is None:
                             logs[i] = map_tree(lambda a: np.empty((len(valid),) + np.shape(a)), record)
@@ -167,9 +172,9 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
             if not alive.any():
                 break
     if one:
-        return map_tree(lambda a: a[:T], logs[0]), valid[:T], k_stop, why, bad[0]
+        return map_tree(lambda a: a[:T], logs[0]), valid[:T], k_stop, why, bad[0], accs[0]
     records = map_tree(lambda *a: np.stack([log[:T] for log in a], axis=1), *logs)
-    return records, valid[:T], k_stop, why, bad
+    return records, valid[:T], k_stop, why, bad, map_tree(lambda *a: np.stack(a), *accs)
 
 
 
@@ -196,12 +201,13 @@ def _scan_program(structure: Any, mapped: Any, native: bool) -> Callable[..., An
             step = traced.compiled()
 
             def one(state: Any, inputs: Any) -> tuple[Any, Any]:
-                carry, alive, k_stop, why, bad = state
+                carry, alive, k_stop, why, bad, acc = state
                 new, record, verdict = step(carry, inputs)
                 now, code, ok = _judge(alive, inputs.k, n, verdict)
                 state = (new, alive & ~now, jnp.where(now, inputs.k, k_stop), jnp.where(now, code, why),
-                         None if bad is None else map_tree(lambda a, b: _where(now, a, b), verdict.bad, bad))
-                return state, (record, ok)
+                         None if bad is None else map_tree(lambda a, b: _where(now, a, b), verdict.bad, bad),
+                         running.fold(acc, record.sample, inputs.k, ok))
+                return state, (record._replace(sample=None), ok)
 
             count = jnp.clip(n + 1 - xs.k[0], 0, xs.k.shape[0])  # the padding after step n: not computed
             if xs.k.shape[0] == 1 and not native:  # log_every = 1: the block is its step (padding: judged as nothing)
@@ -305,7 +311,7 @@ def _types(key: Any) -> set[type]:
 
 
 def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
-          mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any]:
+          mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any, running.Running]:
     """The compiled loop: :func:`_python`'s results, from `lax.scan` over blocks of steps (`mapped`: the runs'
     transitions vmapped; None: one `transition`, on leading run axes or none), run by XLA or, `native`, as C. Tracing
     that meets code needing concrete values (numpy-only code) is a ConfigError naming `simulation.backend` and the
@@ -323,7 +329,7 @@ def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, 
 
 
 def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
-              mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any]:
+              mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any, running.Running]:
     jnp = np if native else jax_module().numpy  # the C program takes host arrays as they are
     if mapped is not None:
         key = pytree.key(runs[0])
@@ -350,7 +356,8 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     one_carry = carry if mapped is None else map_tree(lambda a: a[0], carry)
     lead = shape if not _runs_shape(one_carry) else ()  # a mapped run's carry has no run axes; a stacked one has
     bad = map_tree(lambda a: jnp.zeros(lead + np.shape(a)), one.blanks(one_carry)[1])
-    state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad)
+    state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad,
+             running.start(jnp, shape, one.loop.n))
     records, valid = [], []
     for first in range(0, blocks, per_call):
         size = per_call * log_every
@@ -370,7 +377,8 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
             break
     out = map_tree(lambda *a: np.concatenate(a), *records)
     bad_out = None if state[4] is None else map_tree(np.asarray, state[4])
-    return out, np.concatenate(valid), np.asarray(state[2]), np.asarray(state[3]), bad_out
+    return out, np.concatenate(valid), np.asarray(state[2]), np.asarray(state[3]), bad_out, map_tree(np.asarray,
+                                                                                                     state[5])
 
 
 def _rows(a: Array, keep: int, runs_first: bool) -> Array:
@@ -424,22 +432,23 @@ def drive(runs: Sequence[Any], carries: Sequence[Any], feed: Feed, n: int, log_e
             out = _scan(runs, transition, carry, one_feed, n, log_every, None, backend == "c")
         else:
             out = _python([(transition, carry)], one_feed, None, n, log_every, progress)
-        records, valid, k_stop, why, bad = out
+        records, valid, k_stop, why, bad, acc = out
         if stacked is None:  # a single run: a run axis of one
             records, valid = map_tree(lambda a: a[:, None], records), valid[:, None]
             k_stop, why, bad = k_stop[None], why[None], map_tree(lambda a: a[None], bad)
+            acc = map_tree(lambda a: a[None], acc)
     elif backend in ("jax", "c"):
-        records, valid, k_stop, why, bad = _scan(runs, None, map_tree(lambda *a: np.stack(a), *carries), feed, n,
-                                                 log_every, mapped, backend == "c")
+        records, valid, k_stop, why, bad, acc = _scan(runs, None, map_tree(lambda *a: np.stack(a), *carries), feed, n,
+                                                      log_every, mapped, backend == "c")
     else:
-        records, valid, k_stop, why, bad = _python(list(zip(runs, carries, strict=True)), feed, mapped, n, log_every,
-                                                   progress)
+        records, valid, k_stop, why, bad, acc = _python(list(zip(runs, carries, strict=True)), feed, mapped, n,
+                                                        log_every, progress)
         listed = True
-    return _trace(runs, records, valid, k_stop, why, bad, listed)
+    return _trace(runs, records, valid, k_stop, why, bad, listed, acc)
 
 
 def _trace(runs: Sequence[Any], records: Any, valid: Array, k_stop: Array, why: Array, bad: Any,
-           listed: bool) -> Trace:
+           listed: bool, acc: running.Running) -> Trace:
     """The records thinned to each run's valid rows (the rows after a stop repeat the last valid one) and the statuses,
     built here once."""
     n_logged = valid.sum(axis=0)
@@ -460,4 +469,4 @@ def _trace(runs: Sequence[Any], records: Any, valid: Array, k_stop: Array, why: 
             continue
         one = (bad[i] if listed else map_tree(lambda a: a[i], bad)) if bad is not None else None  # noqa: B023
         status.append(run.status(int(k_stop[i]), int(why[i]), one))
-    return Trace(map_tree(fill, records), n_logged, status)
+    return Trace(map_tree(fill, records), n_logged, status, acc)

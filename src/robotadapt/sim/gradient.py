@@ -94,7 +94,7 @@ class Rollout:
 
         def one(carry: Any, inputs: Any) -> tuple[Any, Any]:
             new, record, _ = step(carry, inputs)
-            return map_tree(lambda a, b: jnp.where(inputs.k < n, a, b), new, carry), record
+            return map_tree(lambda a, b: jnp.where(inputs.k < n, a, b), new, carry), record._replace(sample=None)
 
         @jax.checkpoint
         def block(carry: Any, inputs: Any) -> tuple[Any, Any]:

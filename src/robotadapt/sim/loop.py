@@ -24,10 +24,11 @@ from ..plant.plant import Plant, same_model
 from ..pytree import Module
 from ..trajectories import Reference, Trajectory
 from .driver import GUARD, Verdict
+from .running import Sample
 from .status import Status
 
 Array = Any
-Rate = Callable[[Any, Array, Reference], tuple[Array, Array | None]]  # (t, z, ref) -> (dz/dt, ok): ClosedLoop.rate
+Respond = Callable[[Any, Array, Reference], tuple[Array, Array | None, Array, Array]]  # ClosedLoop.respond
 MAX_LOG_BYTES = 4e9
 
 
@@ -110,12 +111,18 @@ class ClosedLoop(Module):
     def rate(self, t: Array, z: Array, ref: Reference) -> tuple[Array, Array | None]:
         """(dz/dt, ok). `ok` is the law's guard per run, False where its assumption fails at z (dz/dt then holds NaN);
         None for a law without one."""
+        dz, ok, _, _ = self.respond(t, z, ref)
+        return dz, ok
+
+    def respond(self, t: Array, z: Array, ref: Reference) -> tuple[Array, Array | None, Array, Array]:
+        """(dz/dt, ok, τ, u): :meth:`rate` with the law's command τ and the torque u the plant receives."""
         q, dq, x = self.split(z)
         xp = array_namespace(z)
         ok = self.controller.guard(t, x, q, dq, ref)
         if self.needs_acceleration:
             tau = self.controller.torque(t, x, q, dq, ref)
-            head, ddq = self._plant(t, z, q, dq, self.plant.saturate(tau))
+            u = self.plant.saturate(tau)
+            head, ddq = self._plant(t, z, q, dq, u)
             dx = self.controller.update(t, x, q, dq, ddq, ref)
         else:
             tau, dx = self.controller(t, x, q, dq, ref)
@@ -127,7 +134,7 @@ class ClosedLoop(Module):
         if self.w:  # the running minimum is constant within a step and updated after it (after_step)
             d = self.dissipation(t, x, q, dq, ref)[..., None]
             parts += [d, 0.0 * d]
-        return xp.concatenate(parts, axis=-1), ok
+        return xp.concatenate(parts, axis=-1), ok, tau, u
 
     def __call__(self, t: Array, z: Array, ref: Reference) -> Array:
         return self.rate(t, z, ref)[0]
@@ -218,24 +225,24 @@ def sample(loop: ClosedLoop, k: Any, t: Any, z: Array, line: Ring, ref: Referenc
 
 
 def rk4_step(loop: ClosedLoop, t: Any, z: Array, dt: float, r0: Reference, rh: Reference, r1: Reference,
-             rate: Rate | None = None) -> tuple[Array, Array | None, Array | None]:
-    """One classic RK4 step of `rate` (default `loop.rate`): (z at t + dt, ok, z_bad). For a guarded law, `ok` per run
-    says its guard held in all four stages and `z_bad` is the state of the first stage where it did not (else None,
-    None)."""
-    rate = loop.rate if rate is None else rate
-    k1, ok1 = rate(t, z, r0)
+             respond: Respond | None = None) -> tuple[Array, Array | None, Array | None, Array, Array]:
+    """One classic RK4 step of `respond` (default `loop.respond`): (z at t + dt, ok, z_bad, τ, u), τ and u the law's
+    command and the applied torque at the first stage (t, z). For a guarded law, `ok` per run says its guard held in
+    all four stages and `z_bad` is the state of the first stage where it did not (else None, None)."""
+    respond = loop.respond if respond is None else respond
+    k1, ok1, tau, u = respond(t, z, r0)
     z2 = z + 0.5 * dt * k1
-    k2, ok2 = rate(t + 0.5 * dt, z2, rh)
+    k2, ok2, _, _ = respond(t + 0.5 * dt, z2, rh)
     z3 = z + 0.5 * dt * k2
-    k3, ok3 = rate(t + 0.5 * dt, z3, rh)
+    k3, ok3, _, _ = respond(t + 0.5 * dt, z3, rh)
     z4 = z + dt * k3
-    k4, ok4 = rate(t + dt, z4, r1)
+    k4, ok4, _, _ = respond(t + dt, z4, r1)
     z_new = loop.after_step(z + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4))
     if ok1 is None or ok2 is None or ok3 is None or ok4 is None:
-        return z_new, None, None
+        return z_new, None, None, tau, u
     xp = array_namespace(z)
     z_bad = xp.where(ok1[..., None], xp.where(ok2[..., None], xp.where(ok3[..., None], z4, z3), z2), z)
-    return z_new, ok1 & ok2 & ok3 & ok4, z_bad
+    return z_new, ok1 & ok2 & ok3 & ok4, z_bad, tau, u
 
 
 class Step(NamedTuple):
@@ -246,16 +253,26 @@ class Step(NamedTuple):
     z: Array  # the state at t_{k+1}
     ok: Array | None  # a guarded law's guard held in every stage, per run
     z_bad: Array | None  # the first stage state where it did not
+    tau: Array  # the law's command at t_k (the first stage)
+    u: Array  # the torque the plant receives at t_k
 
 
 def step(loop: ClosedLoop, k: Any, t: Any, z: Array, line: Ring | None, dt: float, r0: Reference, rh: Reference,
-         r1: Reference, rate: Rate | None = None) -> Step:
+         r1: Reference, respond: Respond | None = None) -> Step:
     """Fixed step k from t = k·dt: the delay line's sample (if any), then RK4 with the sampled part of x held over the
     step's stages. Pure: the step of :class:`RK4Step` and of the differentiable rollout."""
     if line is not None:
         z, line = sample(loop, k, t, z, line, r0)
-    z_new, ok, z_bad = rk4_step(loop, t, z, dt, r0, rh, r1, rate)
-    return Step(z, line, z_new, ok, z_bad)
+    z_new, ok, z_bad, tau, u = rk4_step(loop, t, z, dt, r0, rh, r1, respond)
+    return Step(z, line, z_new, ok, z_bad, tau, u)
+
+
+class Logged(NamedTuple):
+    """A fixed step's record: the state applied over step k (what the log at t_k holds) and the step's sample for the
+    running metrics (:mod:`robotadapt.sim.running`; the driver folds it at every step and logs None in its place)."""
+
+    z: Array
+    sample: Sample | None
 
 
 class StepInputs(NamedTuple):
@@ -287,17 +304,19 @@ class RK4Step(Module):
     trajectory: Trajectory | None = None
 
     def __call__(self, carry: tuple[Array, Ring | None], inputs: StepInputs,
-                 rate: Rate | None = None) -> tuple[tuple[Array, Ring | None], Array, Verdict]:
+                 respond: Respond | None = None) -> tuple[tuple[Array, Ring | None], Logged, Verdict]:
         k = inputs.k
         if self.trajectory is not None:
             r0, rh, r1 = (self.trajectory(self.dt * (k + h)) for h in (0.0, 0.5, 1.0))
         else:
             r0, rh, r1 = cast(tuple[Reference, Reference, Reference], inputs[1:])
-        s = step(self.loop, k, k * self.dt, carry[0], carry[1], self.dt, r0, rh, r1, rate)
+        s = step(self.loop, k, k * self.dt, carry[0], carry[1], self.dt, r0, rh, r1, respond)
         why = self.loop.divergence(s.z, self.max_state)
         if s.ok is not None:
             why = array_namespace(why).where(s.ok, why, GUARD)
-        return (s.z, s.line), s.applied, Verdict(None, why, s.z_bad)
+        q, dq, _ = self.loop.split(s.applied)
+        sample = Sample(r0.q_des - q, r0.dq_des - dq, s.u, s.tau)
+        return (s.z, s.line), Logged(s.applied, sample), Verdict(None, why, s.z_bad)
 
     def compiled(self) -> Callable[[Any, Any], Any]:
         """The step with dz/dt as a function of its own (an n-DOF arm's dynamics are thousands of operations: traced
@@ -305,12 +324,13 @@ class RK4Step(Module):
         from ..tracing import jax_module
         from .compiled import lean
 
-        return lean(partial(self.__call__, rate=jax_module().jit(self.loop.rate)))
+        return lean(partial(self.__call__, respond=jax_module().jit(self.loop.respond)))
 
-    def blanks(self, carry: tuple[Array, Ring | None]) -> tuple[Array, Array | None]:
-        """Zeros like the record (the state) and like `bad` (the stage state a guard failed at; None without one)."""
+    def blanks(self, carry: tuple[Array, Ring | None]) -> tuple[Logged, Array | None]:
+        """Zeros like the logged record (the state; its sample is not logged) and like `bad` (the stage state a guard
+        failed at; None without one)."""
         zero = array_namespace(carry[0]).zeros_like(carry[0])
-        return zero, zero if self.loop.guarded else None
+        return Logged(zero, None), zero if self.loop.guarded else None
 
     def feed(self, trajectory: Trajectory, runs: bool = False) -> Callable[[int, int], Any]:
         """The inputs of steps first … first + count − 1: the reference at each step's three stage instants in one
@@ -326,10 +346,10 @@ class RK4Step(Module):
 
         return inputs
 
-    def signals(self, records: Array, t: Array, ref: Reference) -> tuple[Array, Array]:
-        """(z, the torque the plant receives) at the logged instants: the records are the states; the torque is
+    def signals(self, records: Logged, t: Array, ref: Reference) -> tuple[Array, Array]:
+        """(z, the torque the plant receives) at the logged instants: the records hold the states; the torque is
         recomputed from them by the pure maps, as :func:`robotadapt.sim.outputs.outputs` does."""
-        return records, self.loop.plant.saturate(self.loop.torque(t, records, ref))
+        return records.z, self.loop.plant.saturate(self.loop.torque(t, records.z, ref))
 
     def start(self, z0: Array, line: Array | None = None) -> tuple[Array, Ring | None]:
         """The carry before step 0: z0 and the delay line from its initial contents `line` (None: no line), in z0's

@@ -26,26 +26,29 @@ COMPILED_OUTPUTS = 10**6  # logged states × parameters from which the maps are 
 
 
 def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status: Status, wall: float,
-            info: dict[str, Any], logged: dict[str, Array] | None = None) -> SimulationResult:
+            info: dict[str, Any], logged: dict[str, Array] | None = None,
+            folded: dict[str, Any] | None = None) -> SimulationResult:
     """Recompute torque, V(t), r(t) and the passivity integral (6.4.4) from the pure maps at the logged instants.
 
     `logged` (sampled-data mode) holds the torque applied at each logged tick (`tau`) and what the run recorded
     besides (`tau_commanded`, `q_measured`, `dq_measured`); in continuous time the applied torque is the saturated
     command. V, r and the passivity integral are evaluated on the true state, φ̂ from what the controller saw. The
     truth is the plant's φ(t) when the controller's model is the plant's; the result's `phi` is its value at the last
-    sample, and `monitors["phi_true"]` its history when it changed during the run (a payload attached).
+    sample, and `monitors["phi_true"]` its history when it changed during the run (a payload attached). `folded`: the
+    metrics the run folded at every step (:mod:`robotadapt.sim.running`), kept as the result's `running`.
     """
     signals, extras = _signals(loop, trajectory, t, t, z, logged)
     truth = signals.pop("truth")
     phi = None if truth is None else truth[-1] if truth.ndim == 2 else truth
     if phi is not None and loop.plant.varies:
         extras["phi_true"] = truth
-    return _result(loop.controller, t, signals, phi, extras, status, wall, info)
+    return _result(loop.controller, t, signals, phi, extras, status, wall, info, folded)
 
 
 def batch_outputs(loop: ClosedLoop, controllers: tuple[Any, ...], trajectory: Trajectory, t: Array, z: Array,
                   status: tuple[Status, ...], wall: float, info: list[dict[str, Any]],
-                  logged: dict[str, Array] | None = None) -> list[SimulationResult]:
+                  logged: dict[str, Array] | None = None,
+                  folded: list[dict[str, Any] | None] | None = None) -> list[SimulationResult]:
     """:func:`outputs` of N runs logged together, `z` `(T, N, m)` (every run logged at every `t`), computed once
     for the batch by the merged `loop` (gains stacked over the runs) and `trajectory`: run i's record is its slice,
     with `controllers[i]` for the signals that need one run's controller. The plant's φ must not change during the
@@ -56,7 +59,8 @@ def batch_outputs(loop: ClosedLoop, controllers: tuple[Any, ...], trajectory: Tr
     for i, ctrl in enumerate(controllers):
         phi = None if truth is None else truth[i] if truth.ndim == 2 else truth
         run = {k: None if v is None else v[:, i] for k, v in signals.items()}
-        out.append(_result(ctrl, t, run, phi, {k: v[:, i] for k, v in extras.items()}, status[i], wall, info[i]))
+        out.append(_result(ctrl, t, run, phi, {k: v[:, i] for k, v in extras.items()}, status[i], wall, info[i],
+                           None if folded is None else folded[i]))
     return out
 
 
@@ -117,7 +121,7 @@ def _maps(loop: ClosedLoop, flags: tuple[bool], times: Array, z: Array, ref: Ref
 
 
 def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | None, extras: dict[str, Array],
-            status: Status, wall: float, info: dict[str, Any]) -> SimulationResult:
+            status: Status, wall: float, info: dict[str, Any], folded: dict[str, Any] | None = None) -> SimulationResult:
     phi_hat = signals["phi_hat"]
     assert phi_hat is not None
     caveat = ctrl.passivity_caveat()  # a law whose passivity claim its gains may not imply
@@ -125,7 +129,7 @@ def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | 
         info = {**info, "passivity_caveat": caveat}
     result = SimulationResult(t=t, **signals, phi=phi,  # type: ignore[arg-type]
                               param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
-                              state_names=ctrl.state_names, status=status, wall_time=wall, info=info)
+                              state_names=ctrl.state_names, status=status, wall_time=wall, info=info, running=folded)
     return replace(result, monitors={**controller_series(result, ctrl, extras.get("phi_true")), **extras})
 
 

@@ -46,6 +46,8 @@ class SimulationResult:
     info: dict[str, Any] = field(default_factory=dict)
     passivity: Array | None = None
     monitors: dict[str, Array] = field(default_factory=dict)
+    #: metrics folded at every step or tick of a fixed-step run, whatever its logging interval (robotadapt.sim.running)
+    running: dict[str, Any] | None = None
 
     def __repr__(self) -> str:
         """One line: status, samples, time span, joints, parameters and the final |e| (the arrays: `arrays()`)."""

@@ -43,6 +43,7 @@ from ..plant.sensors import Sensor
 from ..pytree import Module
 from ..tracing import jax_module
 from ..trajectories import Reference
+from . import running
 from .driver import GUARD, Verdict, drive
 from .loop import REASONS, ClosedLoop, ring_write
 from .status import Status
@@ -97,6 +98,7 @@ class Record(NamedTuple):
     tau_commanded: Array
     q_measured: Array
     dq_measured: Array
+    sample: running.Sample | None = None  # the tick's sample for the running metrics (folded by the driver, not logged)
 
 
 def guarded_rk4(g: Callable[[Array], tuple[Array, Array]], y: Array, h: float) -> tuple[Array, Array, Array]:
@@ -145,9 +147,9 @@ class Tick(Module):
         mid, sample = self.sample(carry, inputs)
         new, why, x_bad = self.advance(mid, inputs, sample, dynamics or self.dynamics)
         if sample.ok is None:
-            return new, self.record(mid, sample), Verdict(None, why, None)
+            return new, self.record(mid, sample, inputs[2]), Verdict(None, why, None)
         x_bad = array_namespace(mid.x).where(sample.ok, x_bad, mid.x)
-        return new, self.record(mid, sample), Verdict(sample.ok, why, (sample.q_m, x_bad))
+        return new, self.record(mid, sample, inputs[2]), Verdict(sample.ok, why, (sample.q_m, x_bad))
 
     def compiled(self) -> Callable[[Carry, Any], tuple[Carry, Record, Verdict]]:
         """The tick with the plant's ds/dt as a function of its own: traced once, called by every RK4 stage of every
@@ -185,10 +187,12 @@ class Tick(Module):
         return carry._replace(x=x, sensor=sensor, actuator=actuator, line=line), Sample(q_m, dq_m, ddq_m, tau, u, dx,
                                                                                         ok, dw)
 
-    def record(self, carry: Carry, sample: Sample) -> Record:
+    def record(self, carry: Carry, sample: Sample, ref: Reference) -> Record:
         """Step 5, from the carry `sample` returned."""
         z = array_namespace(carry.s, carry.x).concatenate([carry.s, carry.x, carry.w])
-        return Record(z, sample.u, sample.tau, sample.q_m, sample.dq_m)
+        n = self.loop.n
+        tally = running.Sample(ref.q_des - carry.s[:n], ref.dq_des - carry.s[n : 2 * n], sample.u, sample.tau)
+        return Record(z, sample.u, sample.tau, sample.q_m, sample.dq_m, tally)
 
     def advance(self, carry: Carry, inputs: Any, sample: Sample,
                 dynamics: Dynamics) -> tuple[Carry, Array, Array | None]:
@@ -309,7 +313,8 @@ class _Draws:
 
 def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory], z0: Array, opts: Sampled,
                     grid: Grid, max_state: float, progress: bool, lines: list[Array] | None,
-                    backend: str = "numpy") -> tuple[Array, Array, Array, list[Status], dict[str, Array]]:
+                    backend: str = "numpy") -> tuple[Array, Array, Array, list[Status], running.Running,
+                                                     dict[str, Array]]:
     """N runs' ticks 0 … `grid.n` through the one driver: one program mapped over the runs (`backend` "jax") or the
     runs in lockstep in Python ("numpy", the reference). `traj`: one trajectory for every run or one per run; `z0`
     `(N, d)`; `lines` each run's delay line contents (None: no line). Returns the logged times, the states `(T, N, d)`,
@@ -322,16 +327,18 @@ def integrate_batch(loops: list[ClosedLoop], traj: Trajectory | list[Trajectory]
     inputs, mapped = feed(ticks, traj if isinstance(traj, list) else [traj], shared)
     trace = drive(ticks, carries, inputs, grid.n, grid.log_every, backend=backend, mapped=mapped, progress=progress)
     records = trace.records
-    return grid.times(records.z.shape[0]), records.z, trace.n_logged, trace.status, ticks[0].logged(records)
+    return (grid.times(records.z.shape[0]), records.z, trace.n_logged, trace.status, trace.running,
+            ticks[0].logged(records))
 
 
 def integrate(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: Sampled, grid: Grid, max_state: float,
               progress: bool, line: DelayLine | None,
-              backend: str = "numpy") -> tuple[Array, Array, Status, dict[str, Array]]:
+              backend: str = "numpy") -> tuple[Array, Array, Status, dict[str, Any], dict[str, Array]]:
     """Ticks 0 … `grid.n` from t = 0, stepped by numpy (`backend` "numpy") or compiled by JAX ("jax"; the same tick,
     equal to round-off; `progress` is not shown); returns the logged (t, z), the status and the logged signals
     (:meth:`Tick.logged`). `line` gives the delay line's initial contents; it is not written. One run of
     :func:`integrate_batch`."""
-    t, z, _, status, logged = integrate_batch([loop], traj, np.asarray(z0)[None], opts, grid, max_state, progress,
-                                              None if line is None else [line.buffer], backend)
-    return t, z[:, 0], status[0], {name: a[:, 0] for name, a in logged.items()}
+    t, z, _, status, folded, logged = integrate_batch([loop], traj, np.asarray(z0)[None], opts, grid, max_state,
+                                                      progress, None if line is None else [line.buffer], backend)
+    return t, z[:, 0], status[0], running.values(running.run(folded, 0), grid.h), {name: a[:, 0] for name, a in
+                                                                                     logged.items()}

@@ -20,6 +20,7 @@ from ..grid import Grid
 from ..plant.plant import Plant, same_model
 from ..trajectories import Trajectory, traceable
 from ..validation import ConfigError, as_scalar, as_vector
+from . import running
 from .backends import Run, execute
 from .driver import drive
 from .integrators import RK4, Sampled, SolveIVP, check_plant_step
@@ -32,16 +33,16 @@ Array = Any
 
 
 def _fixed(loop: ClosedLoop, traj: Trajectory, z0: Array, grid: Grid, max_state: float, progress: bool,
-           line: DelayLine | None, backend: str) -> tuple[Array, Array, Status]:
-    """Fixed-step RK4 from t = 0 through the one driver (:class:`~robotadapt.sim.loop.RK4Step`); returns logged (t, z)
-    and the status. The log at t_k holds the state applied over step k (with a delay line, x as read from it); the last
-    sample, at t_final, is logged, not integrated."""
+           line: DelayLine | None, backend: str) -> tuple[Array, Array, Status, dict[str, Any]]:
+    """Fixed-step RK4 from t = 0 through the one driver (:class:`~robotadapt.sim.loop.RK4Step`); returns logged (t, z),
+    the status and the running metrics (:mod:`robotadapt.sim.running`). The log at t_k holds the state applied over
+    step k (with a delay line, x as read from it); the last sample, at t_final, is logged, not integrated."""
     inside = backend == "c" and traceable(traj)  # the C program evaluates the reference itself
     rk4 = RK4Step(loop, grid.h, max_state, traj if inside else None)
     carry = (z0, None if line is None else Ring.start(line.buffer))
     trace = drive([rk4], [carry], rk4.feed(traj), grid.n, grid.log_every, backend=backend, progress=progress)
-    z = trace.records[:, 0]
-    return grid.times(len(z)), z, trace.status[0]
+    z = trace.records.z[:, 0]
+    return grid.times(len(z)), z, trace.status[0], running.values(running.run(trace.running, 0), grid.h)
 
 
 def _solve_ivp(loop: ClosedLoop, traj: Trajectory, z0: Array, opts: SolveIVP, t_final: float,
@@ -176,6 +177,7 @@ def simulate(plant: Plant, controller: Law, trajectory: Trajectory, *, t_final: 
         info["plant"] = effects
     wall = time.perf_counter()
     logged: dict[str, Array] | None = None
+    folded: dict[str, Any] | None = None
     if isinstance(integrator, SolveIVP):
         if integrator.backend == "jax":  # "auto" keeps scipy, the reference (sim/compiled_ivp.py)
             from .compiled_ivp import integrate_ivp
@@ -197,7 +199,7 @@ def simulate(plant: Plant, controller: Law, trajectory: Trajectory, *, t_final: 
         asked = Run(step, step.start(z0, None if line is None else line.buffer), step.feed(trajectory), n_steps,
                     single=True, traceable=plant.model.traceable and controller.model.traceable)
 
-        def run(backend: str) -> tuple[Array, Array, Status, dict[str, Array] | None]:
+        def run(backend: str) -> tuple[Array, Array, Status, dict[str, Any], dict[str, Array] | None]:
             if isinstance(integrator, Sampled):
                 from .sampled import integrate
 
@@ -206,8 +208,8 @@ def simulate(plant: Plant, controller: Law, trajectory: Trajectory, *, t_final: 
 
         if isinstance(integrator, Sampled):
             info["sampling"] = integrator.describe()
-        (t, z, status, logged), backend = execute(integrator.backend, asked, run)
+        (t, z, status, folded, logged), backend = execute(integrator.backend, asked, run)
         info["backend"] = backend
     wall = time.perf_counter() - wall
     with np.errstate(all="ignore"):  # a diverged run's last samples may overflow in the recomputed outputs
-        return outputs(loop, trajectory, t, z, status, wall, info, logged)
+        return outputs(loop, trajectory, t, z, status, wall, info, logged, folded)

@@ -111,7 +111,7 @@ class Problem:
         self.loop = closed_loop(scenario)
         ctrl = self.loop.controller
         self.gains, self.objective, self.max_torque = gains, objective, max_torque
-        self.rollout = Rollout.make(self.loop, s.trajectory, s.integrator, s.t_final, s.log_every)
+        self.rollout = Rollout.make(self.loop, s.trajectory, s.integrator, s.t_final, 1)  # every step, as metrics
         seen = (s.q0, s.dq0)
         if isinstance(s.integrator, Sampled) and s.plant.sensor is not None:  # what the law measures first
             seen = s.plant.sensor.first_measurement(s.q0, s.dq0, s.integrator.control_period)
