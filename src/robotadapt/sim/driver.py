@@ -42,6 +42,7 @@ GUARD = 3  # the stop code of a law's own guard (Law.guard); 1 and 2 are the div
 CHUNK = 64  # steps fed to the Python loop at a time: one vectorized reference call for them, a small peak memory
 CHUNK_STEPS = 16384  # most steps per compiled call (the last call is padded)
 INPUT_BYTES = 64e6  # most bytes of inputs fed to one compiled call (all runs together)
+FOLD_VALUES = 1024  # the Python loop folds its steps' samples for the metrics at most this many error values at a time
 
 
 class Verdict(NamedTuple):
@@ -121,6 +122,14 @@ def take_run(inputs: Any, i: int, mapped: Any) -> Any:
     return map_tree(lambda a: a[:, i], inputs) if mapped else inputs
 
 
+def _fold(acc: running.Running, steps: list[tuple[Any, int, Array]]) -> running.Running:
+    """`acc` with the buffered (sample, k, valid) of some steps folded in one vectorized pass."""
+    if not steps:
+        return acc
+    samples, ks, valid = zip(*steps, strict=True)
+    return running.fold_steps(acc, list(samples), list(ks), list(valid))
+
+
 def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, log_every: int,
             progress: bool) -> tuple[Any, Array, Array, Array, Any, running.Running]:
     """The Python loop over steps: (the logged records `(T, ...)`, whether each is valid, the stop step, the stop code,
@@ -143,6 +152,7 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
             count = min(CHUNK, n + 1 - first)
             xs = feed(first, count)
             rows = [xs] if one else [take_run(xs, i, mapped) for i in range(len(lanes))]
+            pending: list[list[Any]] = [[] for _ in lanes]
             for j in range(count):
                 k = first + j
                 for i, (transition, _) in enumerate(lanes):
@@ -151,7 +161,9 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
                         continue
                     new, record, verdict = transition(carries[i], map_tree(lambda a: a[j], rows[i]))  # noqa: B023
                     now, code, ok = _judge(alive[lane], k, n, verdict)
-                    accs[i] = running.fold(accs[i], record.sample, k, ok)
+                    pending[i].append((record.sample, k, ok))  # folded with other steps of the chunk, at once
+                    if len(pending[i]) * np.size(record.sample.e) >= FOLD_VALUES:
+                        accs[i], pending[i] = _fold(accs[i], pending[i]), []
                     record = record._replace(sample=None)
                     if k % log_every == 0:  # into a log allocated once, at the first record
                         if logs[i] is None:
@@ -168,6 +180,7 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
                 T += k % log_every == 0
                 if not alive.any():
                     break
+            accs = [_fold(acc, steps) for acc, steps in zip(accs, pending, strict=True)]
             bar.update(count)
             if not alive.any():
                 break

@@ -80,6 +80,37 @@ def fold(acc: Running, sample: Sample, k: Array, valid: Array) -> Running:
                      for a, b in zip(new, acc, strict=True)))
 
 
+def fold_steps(acc: Running, samples: list[Sample], ks: list[int], valid: list[Array]) -> Running:
+    """:func:`fold` of several steps at once (numpy: the Python loop folds a chunk of steps in one vectorized pass):
+    the same sums to the order of the additions, the same maxima, first and last values."""
+    if not samples:
+        return acc
+    s = Sample(*(np.stack(parts) for parts in zip(*samples, strict=True)))
+    ok = np.stack([np.broadcast_to(v, acc.count.shape) for v in valid])  # (steps, runs...)
+    k = np.asarray(ks, dtype=float).reshape((-1,) + (1,) * acc.count.ndim) + np.zeros(ok.shape)
+    mask = ok[..., None]
+    e2 = s.e * s.e
+    norm2, power = e2.sum(axis=-1), (s.tau * s.tau).sum(axis=-1)
+    ends = np.stack([norm2, power], axis=-1)
+    clipped = np.any(np.abs(s.commanded - s.tau) > 1e-9 * (1.0 + np.abs(s.commanded)), axis=-1)
+    norm = np.sqrt(norm2)
+    any_ok = np.asarray(ok.any(axis=0))
+    first_i, last_i = ok.argmax(axis=0), ok.shape[0] - 1 - ok[::-1].argmax(axis=0)
+    pick = (lambda a, i: np.take_along_axis(a, i[None, ..., None], axis=0)[0])  # noqa: E731  row i per run
+    max_norm = np.maximum.accumulate(np.maximum(np.where(ok, norm, 0.0), acc.max_norm), axis=0)
+    above = np.where(ok & (norm > CONVERGED * max_norm), k, -1.0).max(axis=0)
+    started = np.asarray(acc.count > 0)
+    return Running(acc.count + ok.sum(axis=0), acc.sum_e2 + np.where(mask, e2, 0.0).sum(axis=0),
+                   acc.sum_norm2 + np.where(ok, norm2, 0.0).sum(axis=0), acc.sum_power + np.where(ok, power, 0.0).sum(0),
+                   np.where((started | ~any_ok)[..., None], acc.first, pick(ends, first_i)),
+                   np.where(any_ok[..., None], pick(ends, last_i), acc.last),
+                   np.maximum(acc.max_abs_e, np.where(mask, np.abs(s.e), 0.0).max(axis=0)),
+                   np.maximum(acc.max_abs_tau, np.where(mask, np.abs(s.tau), 0.0).max(axis=0)),
+                   np.maximum(acc.max_abs_commanded, np.where(mask, np.abs(s.commanded), 0.0).max(axis=0)),
+                   acc.saturated + (ok & clipped).sum(axis=0), max_norm[-1], np.maximum(acc.above, above),
+                   np.where(any_ok, np.where(ok, k, -1.0).max(axis=0), acc.k_last))
+
+
 def run(acc: Running, i: int) -> Running:
     """Run i's fold, of a fold with a leading run axis."""
     return Running(*(a[i] for a in acc))
