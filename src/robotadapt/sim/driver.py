@@ -42,7 +42,8 @@ GUARD = 3  # the stop code of a law's own guard (Law.guard); 1 and 2 are the div
 CHUNK = 64  # steps fed to the Python loop at a time: one vectorized reference call for them, a small peak memory
 CHUNK_STEPS = 16384  # most steps per compiled call (the last call is padded)
 INPUT_BYTES = 64e6  # most bytes of inputs fed to one compiled call (all runs together)
-FOLD_VALUES = 1024  # the Python loop folds its steps' samples for the metrics at most this many error values at a time
+FOLD_STEPS = 4  # the Python loop folds its steps' samples for the metrics this many steps at a time (a run's sums are
+# then grouped the same whatever the batch it runs in: a sweep's row does not depend on its chunk)
 
 
 class Verdict(NamedTuple):
@@ -162,7 +163,7 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
                     new, record, verdict = transition(carries[i], map_tree(lambda a: a[j], rows[i]))  # noqa: B023
                     now, code, ok = _judge(alive[lane], k, n, verdict)
                     pending[i].append((record.sample, k, ok))  # folded with other steps of the chunk, at once
-                    if len(pending[i]) * np.size(record.sample.e) >= FOLD_VALUES:
+                    if len(pending[i]) >= FOLD_STEPS:
                         accs[i], pending[i] = _fold(accs[i], pending[i]), []
                     record = record._replace(sample=None)
                     if k % log_every == 0:  # into a log allocated once, at the first record

@@ -81,8 +81,9 @@ def fold(acc: Running, sample: Sample, k: Array, valid: Array) -> Running:
 
 
 def fold_steps(acc: Running, samples: list[Sample], ks: list[int], valid: list[Array]) -> Running:
-    """:func:`fold` of several steps at once (numpy: the Python loop folds a chunk of steps in one vectorized pass):
-    the same sums to the order of the additions, the same maxima, first and last values."""
+    """:func:`fold` of several steps at once (numpy: the Python loop folds a few steps in one vectorized pass): the
+    same sums to the order of the additions (each run's steps added in order, then to its sum), the same maxima, first
+    and last values."""
     if not samples:
         return acc
     s = Sample(*(np.stack(parts) for parts in zip(*samples, strict=True)))
