@@ -158,9 +158,9 @@ def _digest(src: Path) -> str:
     return h.hexdigest()
 
 
-def capture(out: Path, src: Path, only: str | None, workers: int) -> int:
-    """Run every variant of every packaged scenario of `src` into `out`; 1 if any errored or crashed or `src` changed
-    meanwhile."""
+def capture(out: Path, src: Path, only: str | None, workers: int, extra: list[str]) -> int:
+    """Run every variant of every packaged scenario of `src` into `out`, each with the overrides `extra` last (`--set`,
+    e.g. simulation.log_every=1); 1 if any errored or crashed or `src` changed meanwhile."""
     src, out = src.resolve(), out.resolve()
     out.mkdir(parents=True, exist_ok=True)
     env = _environment(src, out)
@@ -171,8 +171,9 @@ def capture(out: Path, src: Path, only: str | None, workers: int) -> int:
         return 2
     groups = []
     for path in sorted((src / "robotadapt" / "studies" / "scenarios").glob("*.toml")):
-        jobs = [job for job in variants(path.stem, tomllib.loads(path.read_text(encoding="utf-8")))
-                if only is None or fnmatch.fnmatch(job[0], only)]
+        jobs = [(variant, scenario, overrides + extra)
+                for variant, scenario, overrides in variants(path.stem, tomllib.loads(path.read_text(encoding="utf-8")))
+                if only is None or fnmatch.fnmatch(variant, only)]
         if jobs:
             groups.append(jobs)
     start, before = time.perf_counter(), _digest(src)
@@ -220,8 +221,9 @@ def difference(a: Any, b: Any) -> float | None:
     return float(rel.max())
 
 
-def compare_variant(a: Path, b: Path) -> tuple[str, float, str]:
-    """(group, max rel, what is worst or missing) of one variant's folders."""
+def compare_variant(a: Path, b: Path, keys: list[str] | None = None) -> tuple[str, float, str]:
+    """(group, max rel, what is worst or missing) of one variant's folders; `keys`: only these metrics.json keys (two
+    captures logged at different rates: the metrics every step folds), no result.npz."""
     sa, sb = (json.loads((d / "status.json").read_text()) for d in (a, b))
     if sa["status"] != "ran" or sb["status"] != "ran":
         if sa["status"] == sb["status"] == "refused":
@@ -230,10 +232,11 @@ def compare_variant(a: Path, b: Path) -> tuple[str, float, str]:
     leaves = []
     ma, mb = (_flatten(json.loads((d / "metrics.json").read_text())) for d in (a, b))
     leaves += [(f"metrics:{k}", ma.get(k), mb.get(k), k in ma and k in mb) for k in sorted(ma.keys() | mb.keys())
-               if k not in WALL_CLOCK]
-    with np.load(a / "result.npz") as ra_, np.load(b / "result.npz") as rb_:
-        na, nb = dict(ra_), dict(rb_)
-    leaves += [(f"npz:{k}", na.get(k), nb.get(k), k in na and k in nb) for k in sorted(na.keys() | nb.keys())]
+               if k not in WALL_CLOCK and (keys is None or k.split(".")[0].split("[")[0] in keys)]
+    if keys is None:
+        with np.load(a / "result.npz") as ra_, np.load(b / "result.npz") as rb_:
+            na, nb = dict(ra_), dict(rb_)
+        leaves += [(f"npz:{k}", na.get(k), nb.get(k), k in na and k in nb) for k in sorted(na.keys() | nb.keys())]
     worst, where = 0.0, ""
     for key, x, y, both in leaves:
         rel = difference(x, y) if both else None
@@ -244,14 +247,14 @@ def compare_variant(a: Path, b: Path) -> tuple[str, float, str]:
     return ("equal" if worst <= EQUAL else "small" if worst <= SMALL else "large"), worst, where
 
 
-def compare(a_dir: Path, b_dir: Path) -> int:
+def compare(a_dir: Path, b_dir: Path, keys: list[str] | None = None) -> int:
     """Print one row per variant and the count per group; 1 if any variant is large or missing."""
     names = sorted({p.parent.name for d in (a_dir, b_dir) for p in d.glob("*/status.json")})
     rows = []
     for name in names:
         a, b = a_dir / name, b_dir / name
         if (a / "status.json").exists() and (b / "status.json").exists():
-            rows.append((name, *compare_variant(a, b)))
+            rows.append((name, *compare_variant(a, b, keys)))
         else:
             rows.append((name, "missing", math.nan, f"only in {a_dir if (a / 'status.json').exists() else b_dir}"))
     width = max((len(r[0]) for r in rows), default=7)
@@ -273,17 +276,19 @@ def main() -> int:
     cap.add_argument("--src", type=Path, default=DEFAULT_SRC, help="the source tree to import robotadapt from")
     cap.add_argument("--only", metavar="PATTERN", help="only the variants whose name matches this glob")
     cap.add_argument("--jobs", type=int, default=2, help="scenarios run at once (default 2)")
+    cap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="an override for every variant")
     cmp = sub.add_parser("compare", help="compare two captures")
     cmp.add_argument("a", type=Path, metavar="A_DIR")
     cmp.add_argument("b", type=Path, metavar="B_DIR")
+    cmp.add_argument("--keys", help="compare only these metrics.json keys (comma-separated), no result.npz")
     work = sub.add_parser("_worker")  # internal: one scenario's variants in a fresh interpreter
     work.add_argument("out", type=Path)
     work.add_argument("jobs", type=json.loads)
     args = parser.parse_args()
     if args.command == "capture":
-        return capture(args.out, args.src, args.only, args.jobs)
+        return capture(args.out, args.src, args.only, args.jobs, args.set)
     if args.command == "compare":
-        return compare(args.a, args.b)
+        return compare(args.a, args.b, None if args.keys is None else args.keys.split(","))
     worker(args.out, [(variant, scenario, list(overrides)) for variant, scenario, overrides in args.jobs])
     return 0
 
