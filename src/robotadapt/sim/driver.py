@@ -34,6 +34,7 @@ from ..arrays import array_namespace
 from ..tracing import PROGRAMS, float64, jax_module
 from ..validation import ConfigError
 from . import running
+from .compiled import lean
 from .status import Status
 
 Array = Any
@@ -212,6 +213,7 @@ def _scan_program(structure: Any, mapped: Any, native: bool) -> Callable[..., An
         def block(state: Any, xs: Any) -> tuple[Any, Any]:
             """The block's steps that exist (none of the padding after step n); the first one's record is kept."""
             traced = pytree.unflatten(structure, arrays)  # its cached constants computed from the traced leaves
+            fold = lean(running.fold)  # its short sums written out: they fuse with the step's arithmetic
             step = traced.compiled()
 
             def one(state: Any, inputs: Any) -> tuple[Any, Any]:
@@ -220,7 +222,7 @@ def _scan_program(structure: Any, mapped: Any, native: bool) -> Callable[..., An
                 now, code, ok = _judge(alive, inputs.k, n, verdict)
                 state = (new, alive & ~now, jnp.where(now, inputs.k, k_stop), jnp.where(now, code, why),
                          None if bad is None else map_tree(lambda a, b: _where(now, a, b), verdict.bad, bad),
-                         running.fold(acc, record.sample, inputs.k, ok))
+                         fold(acc, record.sample, inputs.k, ok))
                 return state, (record._replace(sample=None), ok)
 
             count = jnp.clip(n + 1 - xs.k[0], 0, xs.k.shape[0])  # the padding after step n: not computed
