@@ -17,6 +17,8 @@ assumptions can fail on a state (M̂ singular) has a guard, an indicator the loo
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
@@ -31,7 +33,7 @@ from .geometry import Euclidean, Natural, adaptation_gains, geometry
 Array = Any
 
 
-class Law(Module):
+class Law(Module, ABC):
     """The base of every control law (docs/laws.md#model, docs/tutorial.md): a frozen dataclass holding constants only
     (its model, gains, initial estimate), a pytree whose gains are leaves (:mod:`robotadapt.pytree`). A law gives its
     torque and state derivative (`__call__`), its state's names and initial value and its estimate; every other part
@@ -74,22 +76,22 @@ class Law(Module):
         guard skips them."""
         return 0
 
+    #: (τ, dx/dt) = law(t, x, q, q̇, ref): the torque and the derivative of the law's state, e.g. (6.3.14) and
+    #: (6.3.16); a law with `needs_acceleration` gives `torque` and `update` instead
+    __call__: Callable[..., tuple[Array, Array]]
+
     @property
+    @abstractmethod
     def state_names(self) -> tuple[str, ...]:
         """Names of the entries of the state vector x."""
-        raise NotImplementedError(f"{type(self).__name__} gives no state_names")
 
+    @abstractmethod
     def initial_state(self, q0: Array, dq0: Array) -> Array:
         """The state x at t = 0, given the first measurement (filters that start from it need it)."""
-        raise NotImplementedError(f"{type(self).__name__} gives no initial_state")
 
+    @abstractmethod
     def phi_hat(self, x: Array) -> Array:
         """The parameter estimate held in (or fixed by) the law, shape `x.shape[:-1] + (p,)`."""
-        raise NotImplementedError(f"{type(self).__name__} gives no phi_hat")
-
-    def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
-        """(τ, dx/dt): the torque and the derivative of the law's state, e.g. (6.3.14) and (6.3.16)."""
-        raise NotImplementedError(f"{type(self).__name__} gives no __call__")
 
     def torque(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         """τ alone (a law with `needs_acceleration`: from the state and the measured q, q̇, (6.2.5))."""
@@ -150,7 +152,7 @@ class Law(Module):
         (:meth:`~robotadapt.robots.base.RobotModel.regressor_products`)."""
         found = self.regressor(t, x, q, dq, ref)
         if found is None:
-            raise NotImplementedError(f"{type(self).__name__} has no passivity output (regressor)")
+            raise TypeError(f"{type(self).__name__} has no passivity output: its regressor is None")
         Z, r = found
         return matvec(Z, phi), matvec(Z.mT, r), r
 
