@@ -11,8 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from robotadapt.native import c99
-from robotadapt.native.build import Compiled, compiled, compiler
+from robotadapt.native import build, c99
+from robotadapt.native.build import Compiled, compiler
 from robotadapt.native.c99 import PRIMITIVES, Unsupported, translate
 
 pytestmark = pytest.mark.skipif(compiler() is None, reason="no C compiler (set CC or install gcc)")
@@ -56,6 +56,11 @@ CASES = {
                      (np.zeros((3, 0)), np.zeros((0, 2)))),
     "nested calls": (lambda x: jax.jit(lambda y: jnp.sin(y) @ y.T)(x) + jax.nn.relu(x[:, :3]), (A,)),
 }
+
+
+def compiled(fn, *args):
+    """The native program of `fn(*args)` from the package's one trace-to-C entry, without its outputs' layout."""
+    return build.compiled(fn, *args)[0]
 
 
 @pytest.mark.parametrize("name", CASES)

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from .arrays import array_namespace
-from .native.build import INSTALL, compiler, library, shared_library
+from .native.build import INSTALL, compiler, library, shared_library, traced
 from .native.c99 import Unsupported
 from .native.controller import Export, export
 from .plant.actuators import Actuator
@@ -146,9 +146,9 @@ class RealtimeController:
         zeros = np.zeros(n)
         flat, unravel = ravel_pytree(jax.tree_util.tree_map(jax.numpy.asarray, start(self.loop_tick, self.Ts, zeros,
                                                                                      zeros)))
-        step = jax.make_jaxpr(partial(packed, self.loop_tick, self.trajectory, ravel_pytree, unravel))(
-            flat, np.zeros(2 + 2 * n))
-        init = jax.make_jaxpr(lambda q, dq: ravel_pytree(start(self.loop_tick, self.Ts, q, dq))[0])(zeros, zeros)
+        step, _ = traced(partial(packed, self.loop_tick, self.trajectory, ravel_pytree, unravel), flat,
+                         np.zeros(2 + 2 * n))
+        init, _ = traced(lambda q, dq: ravel_pytree(start(self.loop_tick, self.Ts, q, dq))[0], zeros, zeros)
         return step, init
 
     def export(self, prefix: str = "ra", what: str = "") -> Export:

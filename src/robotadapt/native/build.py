@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ..tracing import float64, jax_module
 from ..validation import ConfigError
 from .c99 import c_type, translate
 
@@ -160,13 +161,42 @@ def remember(key: str, program: Compiled, extra: Any) -> None:
     os.replace(f.name, path)
 
 
-def compiled(fn: Callable[..., Any], *examples: Any) -> Compiled:
-    """`fn` traced by JAX on arrays like `examples` and compiled to native code (float64)."""
-    from ..tracing import float64, jax_module
+@float64
+def traced(fn: Callable[..., Any], *args: Any) -> tuple[Any, Any]:
+    """The one trace of a program for C: (the ClosedJaxpr of `fn(*args)` in float64, the layout of its outputs: their
+    tuples with each array's position among the program's outputs instead). `args` and the outputs are tuples (named
+    or not) of arrays; anything else is refused with a ConfigError, for the translator takes flat lists of arrays."""
+    jax = jax_module()
+    closed = jax.make_jaxpr(fn)(*args)
+    if len(closed.jaxpr.invars) != len(_arrays(args)):
+        raise ConfigError("simulation.backend", "a compiled program's inputs hold more than tuples of arrays")
+    count = iter(range(len(closed.jaxpr.outvars)))
+    outputs = _layout(jax.eval_shape(fn, *args), count)
+    if next(count, None) is not None:
+        raise ConfigError("simulation.backend", "a compiled program's outputs hold more than tuples of arrays")
+    return closed, outputs
 
-    @float64
-    def trace() -> Any:
-        jax = jax_module()
-        return jax.make_jaxpr(fn)(*examples)
 
-    return Compiled.translated(trace())
+def compiled(fn: Callable[..., Any], *args: Any, name: str = "program",
+             zeros: Sequence[np.ndarray | None] = ()) -> tuple[Compiled, Any]:
+    """`fn(*args)` traced (:func:`traced`), translated to C and built: (the native program, its outputs' layout);
+    `zeros`: the leading inputs' elements that are zero in every call (folded by the translator)."""
+    closed, outputs = traced(fn, *args)
+    return Compiled.translated(closed, name, zeros=zeros), outputs
+
+
+def _arrays(tree: Any) -> list[Any]:
+    """The arrays of nested tuples, in order (None holds none)."""
+    if tree is None:
+        return []
+    return [a for part in tree for a in _arrays(part)] if isinstance(tree, tuple | list) else [tree]
+
+
+def _layout(tree: Any, count: Any) -> Any:
+    """`tree` (nested tuples, named or not) with each array replaced by the next number of `count` (None kept)."""
+    if tree is None:
+        return None
+    if isinstance(tree, tuple | list):
+        parts = [_layout(part, count) for part in tree]
+        return type(tree)(*parts) if hasattr(tree, "_fields") else type(tree)(parts)
+    return next(count)

@@ -265,7 +265,7 @@ def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: An
         stable = _stable(key)
         program = build.remembered(stable) if stable is not None else None
         if program is None:
-            program = _translate(make(), (arrays, state, xs, n), zeros)
+            program = build.compiled(make(), arrays, state, xs, n, name="chunk", zeros=zeros)
             if stable is not None:
                 build.remember(stable, *program)
         return program
@@ -273,26 +273,6 @@ def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: An
     native, outputs = PROGRAMS.get(("native", key), found)
     values = native(*leaves)
     return map_tree(lambda i: values[i], outputs)
-
-
-@float64
-def _translate(program: Any, args: tuple[Any, ...], zeros: list[np.ndarray]) -> tuple[Any, Any]:
-    """(the C program of `program(*args)`, its outputs' layout: their tuples with each array's position instead);
-    `zeros`: the elements of the leading arguments (`args[0]`) that are zero in every call."""
-    from ..native.build import Compiled
-
-    jax = jax_module()
-    ins, _ = jax.tree_util.tree_flatten(args)
-    arrays, state, xs, n = args
-    if len(ins) != len(arrays) + len(_flatten(state)) + len(_flatten(xs)) + 1:
-        raise ConfigError("simulation.backend", "the compiled loop's inputs hold more than tuples of arrays")
-    closed = jax.make_jaxpr(program)(*args)
-    shapes = jax.eval_shape(program, *args)
-    count = iter(range(len(closed.jaxpr.outvars)))
-    outputs = map_tree(lambda _: next(count), shapes)
-    if next(count, None) is not None:
-        raise ConfigError("simulation.backend", "the compiled loop's outputs hold more than tuples of arrays")
-    return Compiled.translated(closed, "chunk", zeros=zeros), outputs
 
 
 def _stable(key: Any) -> str | None:
