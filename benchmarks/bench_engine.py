@@ -43,6 +43,23 @@ def compiled_run(log_every: int) -> np.ndarray:
     return np.concatenate([res.q[-1], res.dq[-1], res.x[-1]])
 
 
+def without_lean() -> float:
+    """The steady compiled run (log_every = 1) with the step's short sums left as XLA's dot and reduce kernels: what
+    :func:`robotadapt.sim.compiled.lean` saves, so that it is kept only while this row shows it pays."""
+    from robotadapt.sim import compiled
+    from robotadapt.tracing import PROGRAMS
+
+    kept = compiled.lean
+    compiled.lean = lambda fn: fn
+    PROGRAMS.items.clear()
+    try:
+        compiled_run(1)
+        return timed(lambda: compiled_run(1), 5)[0]
+    finally:
+        compiled.lean = kept
+        PROGRAMS.items.clear()
+
+
 def fresh(args: list[str], cache: str) -> float:
     """Wall time of a fresh process running `args` with the compilation cache in `cache`."""
     env = dict(os.environ, ROBOTADAPT_CACHE=cache)
@@ -80,6 +97,7 @@ def main() -> None:
         compiled_run(log_every)  # trace and compile: not the steady state
         seconds = timed(lambda every=log_every: compiled_run(every), 5)[0]
         rows.append((f"robotadapt, compiled, steady, {what}", seconds, 1))
+    rows.append(("robotadapt, compiled, steady, short sums kept (no lean)", without_lean(), 1))
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
         derived = Path(os.environ.get("ROBOTADAPT_CACHE", Path.home() / ".cache" / "robotadapt")) / "dh"
         if derived.is_dir():  # the PUMA's sympy derivation is not what is timed: only the JAX cache starts empty

@@ -34,7 +34,6 @@ from ..arrays import array_namespace
 from ..tracing import PROGRAMS, float64, jax_module
 from ..validation import ConfigError
 from . import running
-from .compiled import lean
 from .status import Status
 
 Array = Any
@@ -128,8 +127,8 @@ def _fold(acc: running.Running, steps: list[tuple[Any, int, Array]]) -> running.
     """`acc` with the buffered (sample, k, valid) of some steps folded in one vectorized pass."""
     if not steps:
         return acc
-    samples, ks, valid = zip(*steps, strict=True)
-    return running.fold_steps(acc, list(samples), list(ks), list(valid))
+    return running.fold_rows(acc, np.stack([running.row(sample, ok) for sample, _, ok in steps]),
+                             np.array([k for _, k, _ in steps]))
 
 
 def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, log_every: int,
@@ -211,30 +210,33 @@ def _scan_program(structure: Any, mapped: Any, native: bool) -> Callable[..., An
 
     def run(arrays: list[Array], state: Any, xs: Any, n: Array) -> Any:
         def block(state: Any, xs: Any) -> tuple[Any, Any]:
-            """The block's steps that exist (none of the padding after step n); the first one's record is kept."""
+            """The block's steps that exist (none of the padding after step n): the first one's record, and every
+            step's row for the running metrics (:func:`robotadapt.sim.running.row`; zeros for the padding)."""
             traced = pytree.unflatten(structure, arrays)  # its cached constants computed from the traced leaves
-            fold = lean(running.fold)  # its short sums written out: they fuse with the step's arithmetic
             step = traced.compiled()
 
             def one(state: Any, inputs: Any) -> tuple[Any, Any]:
-                carry, alive, k_stop, why, bad, acc = state
+                carry, alive, k_stop, why, bad = state
                 new, record, verdict = step(carry, inputs)
                 now, code, ok = _judge(alive, inputs.k, n, verdict)
                 state = (new, alive & ~now, jnp.where(now, inputs.k, k_stop), jnp.where(now, code, why),
-                         None if bad is None else map_tree(lambda a, b: _where(now, a, b), verdict.bad, bad),
-                         fold(acc, record.sample, inputs.k, ok))
-                return state, (record._replace(sample=None), ok)
+                         None if bad is None else map_tree(lambda a, b: _where(now, a, b), verdict.bad, bad))
+                return state, (record._replace(sample=None), ok, running.row(record.sample, ok))
 
             count = jnp.clip(n + 1 - xs.k[0], 0, xs.k.shape[0])  # the padding after step n: not computed
             if xs.k.shape[0] == 1 and not native:  # log_every = 1: the block is its step (padding: judged as nothing)
-                return one(state, map_tree(lambda a: a[0], xs))
+                state, (record, ok, row) = one(state, map_tree(lambda a: a[0], xs))
+                return state, (record, ok, row[None])
 
             def body(i: Array, carried: Any) -> Any:  # one copy of the step in the program: its record kept at i = 0
-                state, kept = one(carried[0], map_tree(lambda a: a[i], xs))
-                return state, map_tree(lambda a, b: jnp.where(i == 0, a, b), kept, carried[1])
+                state, (record, ok, row) = one(carried[0], map_tree(lambda a: a[i], xs))
+                kept = map_tree(lambda a, b: jnp.where(i == 0, a, b), (record, ok), carried[1])
+                return state, kept, lax.dynamic_update_index_in_dim(carried[2], row, i, 0)
 
             blank = (traced.blanks(state[0])[0], jnp.zeros_like(state[1]))
-            return lax.fori_loop(0, count, body, (state, blank))
+            rows = jnp.zeros((xs.k.shape[0],) + state[1].shape + (3 * traced.loop.n + 1,))
+            state, kept, rows = lax.fori_loop(0, count, body, (state, blank, rows))
+            return state, (*kept, rows)
 
         return lax.scan(block, state, xs)
 
@@ -343,7 +345,7 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     one = transition if mapped is None else runs[0]
     static = (pytree.key(one), log_every, axes) if native else None  # what the C program is
     probe = feed(0, 1)
-    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe))
+    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe)) + 8 * int(np.prod(shape)) * (3 * one.loop.n + 1)
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
     most = max(1, int(min(CHUNK_STEPS, INPUT_BYTES // max(step_bytes, 1))) // log_every)
     # XLA: a power of two, few shapes and compilations; C: one shape per program whatever the run's length (gcc builds
@@ -352,8 +354,8 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     one_carry = carry if mapped is None else map_tree(lambda a: a[0], carry)
     lead = shape if not _runs_shape(one_carry) else ()  # a mapped run's carry has no run axes; a stacked one has
     bad = map_tree(lambda a: jnp.zeros(lead + np.shape(a)), one.blanks(one_carry)[1])
-    state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad,
-             running.start(jnp, shape, one.loop.n))
+    state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad)
+    folded = running.start(np, shape, one.loop.n)
     records, valid = [], []
     for first in range(0, blocks, per_call):
         size = per_call * log_every
@@ -363,18 +365,21 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
         xs = xs._replace(k=np.arange(first * log_every, first * log_every + size))
         xs = _blocked(xs, mapped, per_call, log_every)
         if native:
-            state, (record, ok) = _native(lambda: _program(one, log_every, axes, True), static, arrays, state, xs, n)
+            state, (record, ok, rows) = _native(lambda: _program(one, log_every, axes, True), static, arrays, state,
+                                                xs, n)
         else:
-            state, (record, ok) = _program(one, log_every, axes)(arrays, state, xs, n)
+            state, (record, ok, rows) = _program(one, log_every, axes)(arrays, state, xs, n)
         move = partial(_rows, keep=min(per_call, blocks - first), runs_first=mapped is not None)
         records.append(map_tree(move, record))
         valid.append(move(ok))
+        steps = np.asarray(rows) if mapped is None else np.moveaxis(np.asarray(rows), 0, 2)  # (blocks, L, runs..., w)
+        folded = running.fold_rows(folded, steps.reshape((-1,) + steps.shape[2:])[:real],  # the padding left out
+                                   np.arange(first * log_every, first * log_every + real))
         if not bool(np.asarray(state[1]).any()):
             break
     out = map_tree(lambda *a: np.concatenate(a), *records)
     bad_out = None if state[4] is None else map_tree(np.asarray, state[4])
-    return out, np.concatenate(valid), np.asarray(state[2]), np.asarray(state[3]), bad_out, map_tree(np.asarray,
-                                                                                                     state[5])
+    return out, np.concatenate(valid), np.asarray(state[2]), np.asarray(state[3]), bad_out, folded
 
 
 def _rows(a: Array, keep: int, runs_first: bool) -> Array:

@@ -2,7 +2,8 @@
 every step or tick of the run (:mod:`robotadapt.sim.driver`), on every backend, whatever the logging interval.
 
 A transition's record carries the step's :class:`Sample` (the tracking error, its rate, the applied and the commanded
-torque at t_k); :func:`fold` adds it to the run's :class:`Running` where the record is valid. From the fold, at the end
+torque at t_k); the driver turns it into a :func:`row` and :func:`fold_rows` adds a few steps' rows at a time to the
+run's :class:`Running` where the record is valid. From the fold, at the end
 (:func:`values`, numbers of :func:`robotadapt.analysis.metrics.metrics`, over the instants t_k = k·h of the run grid):
 
 - `rms_error` √(Σ_k e_i(t_k)² / K) per joint and `rms_error_norm` √(Σ_k ‖e(t_k)‖² / K), K the number of instants;
@@ -62,54 +63,59 @@ def start(xp: Any, runs: tuple[int, ...], n: int) -> Running:
                    zeros, zeros, zeros - 1.0, zeros - 1.0)
 
 
-def fold(acc: Running, sample: Sample, k: Array, valid: Array) -> Running:
-    """`acc` with step k's `sample` added where `valid` (per run); unchanged elsewhere."""
+def row(sample: Sample, valid: Array) -> Array:
+    """What a step hands the fold, as one array `(runs..., 3n + 1)`: e, the applied torque, the command, and 1.0 where
+    the step's record is valid (else 0.0). A compiled loop writes one a step (one array: XLA runs each output's update
+    as a kernel of its own) and :func:`fold_rows` folds a call's rows at once on the host: the fold inside the loop
+    cost Example 6.3.1's compiled step some 8 µs of kernels, the rows 0.1 µs (benchmarks/bench_single_run.py)."""
     xp = array_namespace(sample.e)
-    e2 = sample.e * sample.e
-    norm2, power = e2.sum(axis=-1), (sample.tau * sample.tau).sum(axis=-1)
-    ends = xp.stack([norm2, power], axis=-1)
-    clipped = xp.any(xp.abs(sample.commanded - sample.tau) > 1e-9 * (1.0 + xp.abs(sample.commanded)), axis=-1)
-    norm = xp.sqrt(norm2)
-    max_norm = xp.maximum(acc.max_norm, norm)
-    new = Running(acc.count + 1.0, acc.sum_e2 + e2, acc.sum_norm2 + norm2, acc.sum_power + power,
-                  xp.where((acc.count == 0)[..., None], ends, acc.first), ends,
-                  xp.maximum(acc.max_abs_e, xp.abs(sample.e)), xp.maximum(acc.max_abs_tau, xp.abs(sample.tau)),
-                  xp.maximum(acc.max_abs_commanded, xp.abs(sample.commanded)), acc.saturated + clipped,
-                  max_norm, xp.where(norm > CONVERGED * max_norm, k + 0.0 * norm, acc.above), k + 0.0 * norm)
-    return Running(*(xp.where(valid.reshape(valid.shape + (1,) * (a.ndim - valid.ndim)), a, b)
-                     for a, b in zip(new, acc, strict=True)))
+    ok = xp.asarray(valid, dtype=sample.e.dtype)
+    return xp.concatenate([sample.e, sample.tau, sample.commanded,
+                           xp.broadcast_to(ok, sample.e.shape[:-1])[..., None]], axis=-1)
 
 
-def fold_steps(acc: Running, samples: list[Sample], ks: list[int], valid: list[Array]) -> Running:
-    """:func:`fold` of several steps at once (numpy: the Python loop folds a few steps in one vectorized pass): the
-    same sums to the order of the additions (each run's steps added in order, then to its sum), the same maxima, first
-    and last values."""
-    if not samples:
+def fold_rows(acc: Running, rows: Array, ks: Array) -> Running:
+    """`acc` with the :func:`row`s of some steps, `(steps, runs..., 3n + 1)`, folded in one vectorized pass (numpy);
+    `ks` the steps' indices. The same sums as a step-by-step fold to the order of the additions (each run's steps
+    added, then to its sum), the same maxima, first and last values."""
+    rows = np.asarray(rows)
+    if rows.shape[0] == 0:
         return acc
-    s = Sample(*(np.stack(parts) for parts in zip(*samples, strict=True)))
-    ok = np.stack([np.broadcast_to(v, acc.count.shape) for v in valid])  # (steps, runs...)
-    k = np.asarray(ks, dtype=float).reshape((-1,) + (1,) * acc.count.ndim) + np.zeros(ok.shape)
-    mask = ok[..., None]
-    e2 = s.e * s.e
-    norm2, power = e2.sum(axis=-1), (s.tau * s.tau).sum(axis=-1)
-    ends = np.stack([norm2, power], axis=-1)
-    clipped = np.any(np.abs(s.commanded - s.tau) > 1e-9 * (1.0 + np.abs(s.commanded)), axis=-1)
+    n = (rows.shape[-1] - 1) // 3
+    c = np.ascontiguousarray(np.moveaxis(rows, 0, -1))  # (runs..., 3n + 1, steps): numpy's loops run along the steps
+    e, tau, commanded, ok = c[..., :n, :], c[..., n : 2 * n, :], c[..., 2 * n : 3 * n, :], c[..., -1, :] > 0.5
+    k = np.broadcast_to(np.asarray(ks, dtype=float), ok.shape)
+    every = bool(ok.all())  # the common case: no step to leave out (no mask applied)
+    zero = ~ok[..., None, :]
+
+    def only(valid: Array, a: Array, fill: float = 0.0) -> Array:  # `a` where the step is valid, else `fill`
+        return a if every else np.where(valid, a, fill)
+
+    e2 = e * e
+    norm2, power = e2.sum(axis=-2), (tau * tau).sum(axis=-2)
+    clipped = np.any(np.abs(commanded - tau) > 1e-9 * (1.0 + np.abs(commanded)), axis=-2)
     norm = np.sqrt(norm2)
-    any_ok = np.asarray(ok.any(axis=0))
-    first_i, last_i = ok.argmax(axis=0), ok.shape[0] - 1 - ok[::-1].argmax(axis=0)
-    pick = (lambda a, i: np.take_along_axis(a, i[None, ..., None], axis=0)[0])  # noqa: E731  row i per run
-    max_norm = np.maximum.accumulate(np.maximum(np.where(ok, norm, 0.0), acc.max_norm), axis=0)
-    above = np.where(ok & (norm > CONVERGED * max_norm), k, -1.0).max(axis=0)
+    any_ok = ok.any(axis=-1)
+    first_i, last_i = ok.argmax(axis=-1), ok.shape[-1] - 1 - ok[..., ::-1].argmax(axis=-1)
+    ends = np.stack([norm2, power], axis=-2)  # (runs..., 2, steps)
+
+    def pick(i: Array) -> Array:  # the ends at step i of each run
+        return np.take_along_axis(ends, np.broadcast_to(i[..., None, None], ends.shape[:-1] + (1,)), axis=-1)[..., 0]
+
+    def peak(a: Array) -> Array:
+        return only(~zero, np.abs(a)).max(axis=-1)
+
+    max_norm = np.maximum.accumulate(np.maximum(only(ok, norm), acc.max_norm[..., None]), axis=-1)
+    above = np.where(ok & (norm > CONVERGED * max_norm), k, -1.0).max(axis=-1)
     started = np.asarray(acc.count > 0)
-    return Running(acc.count + ok.sum(axis=0), acc.sum_e2 + np.where(mask, e2, 0.0).sum(axis=0),
-                   acc.sum_norm2 + np.where(ok, norm2, 0.0).sum(axis=0), acc.sum_power + np.where(ok, power, 0.0).sum(0),
-                   np.where((started | ~any_ok)[..., None], acc.first, pick(ends, first_i)),
-                   np.where(any_ok[..., None], pick(ends, last_i), acc.last),
-                   np.maximum(acc.max_abs_e, np.where(mask, np.abs(s.e), 0.0).max(axis=0)),
-                   np.maximum(acc.max_abs_tau, np.where(mask, np.abs(s.tau), 0.0).max(axis=0)),
-                   np.maximum(acc.max_abs_commanded, np.where(mask, np.abs(s.commanded), 0.0).max(axis=0)),
-                   acc.saturated + (ok & clipped).sum(axis=0), max_norm[-1], np.maximum(acc.above, above),
-                   np.where(any_ok, np.where(ok, k, -1.0).max(axis=0), acc.k_last))
+    return Running(acc.count + ok.sum(axis=-1), acc.sum_e2 + only(~zero, e2).sum(axis=-1),
+                   acc.sum_norm2 + only(ok, norm2).sum(axis=-1), acc.sum_power + only(ok, power).sum(axis=-1),
+                   np.where((started | ~any_ok)[..., None], acc.first, pick(first_i)),
+                   np.where(any_ok[..., None], pick(last_i), acc.last),
+                   np.maximum(acc.max_abs_e, peak(e)), np.maximum(acc.max_abs_tau, peak(tau)),
+                   np.maximum(acc.max_abs_commanded, peak(commanded)), acc.saturated + (ok & clipped).sum(axis=-1),
+                   max_norm[..., -1], np.maximum(acc.above, above),
+                   np.where(any_ok, only(ok, k, -1.0).max(axis=-1), acc.k_last))
 
 
 def run(acc: Running, i: int) -> Running:
