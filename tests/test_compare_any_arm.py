@@ -20,7 +20,7 @@ from robotadapt.plant.plant import Plant
 from robotadapt.robots import TwoLinkArm
 from robotadapt.sim.integrators import RK4
 from robotadapt.sim.simulation import simulate
-from robotadapt.studies.compare import LINEUP, brief, compare, lineup
+from robotadapt.studies.compare import brief, compare, contenders, lineup
 from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import sinusoid
 from robotadapt.validation import ConfigError
@@ -108,7 +108,7 @@ def test_on_the_book_arm_made_twice_as_heavy_every_law_but_composite_repeats_the
     heavy = load("example-6.3.1", ["simulation.t_final=0.5", "plant.phi=[1.6, 4.6]", "controller.Kv=20.0",
                                    "controller.Gamma=40.0", "controller.phi_hat0=[1.7, 4.4]"])
     rows, heavy_rows = compare(book)[0], compare(heavy)[0]
-    assert [r.entry.name for r in rows] == [r.entry.name for r in heavy_rows] == list(LINEUP)
+    assert [r.entry.name for r in rows] == [r.entry.name for r in heavy_rows] == list(contenders())
     for a, b in zip(rows, heavy_rows, strict=True):
         same = np.allclose(b.result.e, a.result.e, rtol=1e-9, atol=1e-12)
         assert same == (a.entry.name != "composite"), a.entry.name

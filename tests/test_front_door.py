@@ -14,9 +14,21 @@ import robotadapt as ra
 
 @pytest.mark.parametrize("name", ra.__all__[1:])
 def test_every_name_is_its_modules_object(name):
-    module = importlib.import_module(f"robotadapt.{ra._WHERE[name]}")
-    assert getattr(ra, name) is getattr(module, name)
+    value = getattr(ra, name)
+    module = importlib.import_module(f"robotadapt.{ra._WHERE[name]}" if name in ra._WHERE else value.__module__)
+    assert value is getattr(module, name)
     assert name in dir(ra)
+
+
+def test_the_laws_are_the_registered_ones():
+    """The laws and update laws at the front door are the classes registered in robotadapt.controllers, by name: no
+    list of them anywhere else."""
+    from robotadapt.controllers import registered
+
+    laws = {cls.__name__ for table in ("controller", "law") for cls in registered(table).values()}
+    assert {"InertiaRelated", "PassivityBased", "DCAL", "Repetitive", "Gradient", "LandauPI", "SwitchingSigma"} <= laws
+    assert laws <= set(ra.__all__) and laws <= set(dir(ra))
+    assert not laws & set(ra.EXPORTS["controllers"])
 
 
 def test_an_unknown_name_is_an_attribute_error():
@@ -26,10 +38,12 @@ def test_an_unknown_name_is_an_attribute_error():
 
 def test_importing_the_package_touches_nothing_outside_it():
     """A fresh interpreter: `import robotadapt` leaves sys.meta_path as it was and imports neither JAX, scipy nor
-    matplotlib; the first `ra.load` does not switch JAX's settings before a program of the project needs JAX."""
+    matplotlib (nor the controllers); the first `ra.load` does not switch JAX's settings before a program of the project
+    needs JAX."""
     code = ("import sys; hooks = list(sys.meta_path); import robotadapt as ra; "
             "assert sys.meta_path == hooks, sys.meta_path; "
             "heavy = [m for m in ('jax', 'scipy', 'matplotlib') if m in sys.modules]; assert not heavy, heavy; "
+            "assert 'robotadapt.controllers' not in sys.modules; "
             "assert all(hasattr(ra, k) for k in ('load', 'simulate', 'Plant', 'RK4', 'Sampled', 'metrics')); "
             "print('ok')")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

@@ -12,7 +12,7 @@ import pytest
 import tomli_w
 
 from robotadapt.studies.scenarios import load
-from robotadapt.studies.scenarios.build import REGISTRY, keys, setup
+from robotadapt.studies.scenarios.build import REGISTRIES, keys, kinds, setup
 from robotadapt.validation import ConfigError
 
 if sys.version_info >= (3, 11):
@@ -37,8 +37,8 @@ def test_the_keys_page_is_current():
 
 def test_the_keys_page_lists_every_key_of_every_kind_with_a_meaning():
     text = (DOCS / "keys.md").read_text(encoding="utf-8")
-    for registry, table in REGISTRY.items():
-        for kind in table:
+    for registry in REGISTRIES:
+        for kind in kinds(registry):
             assert f'### kind = "{kind}"' in text
             for key in keys(registry, kind):
                 assert f"| `{key}` |" in text

@@ -192,6 +192,6 @@ def test_sum_of_sines_is_the_public_constructor_and_its_shapes_are_unambiguous()
 
 
 def test_the_scenario_kind_uses_the_public_constructor():
-    from robotadapt.studies.scenarios.build import REGISTRY
+    from robotadapt.studies.scenarios.build import TARGETS
 
-    assert REGISTRY["trajectory"]["sum_of_sines"][0] == "trajectories:sum_of_sines"
+    assert TARGETS["trajectory"]["sum_of_sines"][0] == "trajectories:sum_of_sines"

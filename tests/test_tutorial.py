@@ -49,3 +49,12 @@ def test_the_scenario_names_the_users_class_and_the_cli_runs_and_sweeps_it(print
     assert written["status"] == "ok"
     assert (folder / "results/dead-zone/scenario.toml").read_text().count('kind = "deadzone:DeadZoneSlotineLi"') == 1
     assert "4 ok, 0 not finished" in out
+
+
+def test_a_law_of_your_own_registers_itself_in_its_class(printed):
+    out, _ = printed
+    assert "registered: True True ['sign_robust', 'dead_zone', 'dcal', 'repetitive']" in out
+    assert "in the lineup: Peterson & Narendra; gains: Example 6.3.1; δ = 0.2; from the scenario: Kv" in out
+    text = PAGE.read_text(encoding="utf-8")
+    assert "`registered: True True ['sign_robust', 'dead_zone', 'dcal', 'repetitive']`" in text
+    assert "`in the lineup: Peterson & Narendra; gains: Example 6.3.1; δ = 0.2;\nfrom the scenario: Kv`" in text

@@ -14,7 +14,7 @@ import pytest
 from robotadapt.sim import RK4, simulate
 from robotadapt.sim.integrators import NotTraceableWarning
 from robotadapt.studies.scenarios import load
-from robotadapt.studies.scenarios.build import REGISTRY, build, keys
+from robotadapt.studies.scenarios.build import build, keys, kinds
 from robotadapt.validation import ConfigError
 
 LAW = '''
@@ -72,7 +72,7 @@ def test_a_module_in_the_current_folder_is_a_controller_kind(user_module, tmp_pa
     assert np.allclose(res.tau, 30.0 * r, atol=1e-12)
     taken = keys("controller", "mylaws:Gravityless")  # the class's fields, less the model it takes first
     assert list(taken) == ["Kv", "Lam", "phi_hat0"] and taken["Lam"] == 1.0
-    assert "mylaws:Gravityless" not in REGISTRY["controller"]  # nothing registered: docs/keys.md stays as it is
+    assert "mylaws:Gravityless" not in kinds("controller")  # nothing registered: docs/keys.md stays as it is
 
 
 @pytest.mark.parametrize("controller, message", [

@@ -2,7 +2,9 @@
 
 The front door, `import robotadapt as ra`: the names a user needs, each imported from its module when first used, so
 that importing the package stays light (no JAX, scipy or matplotlib until a name needs them) and changes nothing
-outside it (no import hooks, no JAX settings). docs/own-arm.md walks through them on an arm of your own.
+outside it (no import hooks, no JAX settings). docs/own-arm.md walks through them on an arm of your own. The laws and
+update laws are every class registered in `robotadapt.controllers` (:mod:`robotadapt.controllers.registry`), by its
+name: `ra.InertiaRelated`, `ra.Gradient`, ...; the first such name imports the controllers.
 
 >>> import robotadapt as ra
 >>> arm = ra.TwoLinkArm()
@@ -20,7 +22,7 @@ from typing import Any
 
 __version__ = version("robotadapt")
 
-#: module (relative to the package) → the names the front door takes from it
+#: module (relative to the package) → the names the front door takes from it, besides the laws (module docstring)
 EXPORTS = {
     "studies.scenarios": ("load", "available"),
     "sim": ("simulate", "simulate_batch", "RK4", "Sampled", "SolveIVP", "SimulationResult"),
@@ -30,9 +32,7 @@ EXPORTS = {
     "plant.unmodeled": ("Payload", "ElasticJoint"),
     "robots": ("OneLinkArm", "TwoLinkArm", "PolarArm", "PinocchioArm", "SymbolicArm"),
     "robots.catalog": ("planar", "dh_arm", "urdf_arm", "example_arm"),
-    "controllers": ("PD", "PDGravity", "ComputedTorque", "AdaptiveComputedTorque", "InertiaRelated", "PassivityBased",
-                    "Composite", "SignRobust", "DCAL", "Repetitive", "pd_servo", "pid_servo", "state_space_servo"),
-    "controllers.adaptation": ("Gradient", "LandauPI", "SwitchingSigma"),
+    "controllers": ("pd_servo", "pid_servo", "state_space_servo"),
     "trajectories": ("sinusoid", "sum_of_sines", "quintic", "constant", "exponential_step"),
     "analysis.metrics": ("metrics",),
     "report.files": ("save_result",),
@@ -40,18 +40,31 @@ EXPORTS = {
     "report.output": ("FigureFormat",),
 }
 _WHERE = {name: module for module, names in EXPORTS.items() for name in names}
-__all__ = ["__version__", *_WHERE]
+
+
+def _laws() -> dict[str, Any]:
+    """Every registered law and update law by its class name (imports robotadapt.controllers)."""
+    laws: dict[str, Any] = import_module(f"{__name__}.controllers.registry").by_name()
+    return laws
 
 
 def __getattr__(name: str) -> Any:
-    """`ra.<name>`: the object of that name in its module, imported now (PEP 562)."""
+    """`ra.<name>`: the object of that name in its module, or the registered law of that class name, imported now
+    (PEP 562); `ra.__all__`: every name, the laws registered so far with them."""
     module = _WHERE.get(name)
-    if module is None:
+    if module is not None:
+        value = getattr(import_module(f"{__name__}.{module}"), name)
+    elif name == "__all__":
+        return ["__version__", *_WHERE, *_laws()]
+    elif name.startswith("_") or name not in (laws := _laws()):
         raise AttributeError(f"module 'robotadapt' has no attribute {name!r}")
-    value = getattr(import_module(f"{__name__}.{module}"), name)
+    else:
+        value = laws[name]
+        if not value.__module__.startswith(f"{__name__}."):
+            return value  # a user's law: looked up again next time (it may be unregistered)
     globals()[name] = value  # the next access is a plain lookup
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+    return sorted(set(globals()) | set(_WHERE) | set(_laws()))

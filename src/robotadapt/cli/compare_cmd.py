@@ -12,9 +12,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     compare = sub.add_parser("compare", help="compare controllers on one scenario; write report.html and comparison.json")
     add_scenario_arguments(compare)
     compare.add_argument("--controllers", metavar="A,B,C",
-                         help="comma-separated names from robotadapt.studies.compare.LINEUP, e.g. "
-                              "slotine_li,dcal,repetitive (default: every controller that applies; an unknown name lists "
-                              "them all)")
+                         help="comma-separated names of the lineup (each law's own entries, "
+                              "robotadapt.studies.compare.contenders), e.g. slotine_li,dcal,repetitive (default: every "
+                              "controller that applies; an unknown name lists them all)")
     compare.add_argument("--fair", action="store_true",
                          help="tune every law's own gains to the same --objective under the same --max-torque first "
                               "(robotadapt tune), then compare; laws that cannot be differentiated keep the lineup's "

@@ -12,7 +12,7 @@ state `xa` (shape `(..., state_size)`):
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from ..arrays import array_namespace, quad
 from ..pytree import Module, derived
 from ..validation import as_gain, scalar_gain
 from .base import inverse
+from .registry import Registered
 
 Array = Any
 
@@ -52,9 +53,13 @@ class UpdateLaw(Protocol):
         """The parameter part of the controller's Lyapunov function for the true φ (monitors only)."""
 
 
-class EstimateLaw(Module):
+class EstimateLaw(Registered, Module):
     """The state of a law that keeps one vector of p parameters (φ̂ or φ̂_I), starting at φ̂(0): a mixin of the laws'
-    dataclasses, which hold `p`."""
+    dataclasses, which hold `p`. A law that names its `kind` is a kind of `[controller.law]`
+    (:mod:`robotadapt.controllers.registry`)."""
+
+    registry: ClassVar[str] = "law"
+    first: ClassVar[str | None] = "p"
 
     p: int
 
@@ -77,6 +82,9 @@ class EstimateLaw(Module):
 @dataclass(frozen=True, eq=False)
 class Gradient(EstimateLaw):
     """Gradient law of Example 6.4.1: dφ̂/dt = Γ Zᵀ r. Passive with β = ½ φ̃(0)ᵀ Γ⁻¹ φ̃(0) (docs/laws.md#gradient)."""
+
+    kind = "gradient"
+    tuned = ("Gamma",)
 
     p: int
     Gamma: Any
@@ -106,6 +114,9 @@ class LandauPI(EstimateLaw):
 
     State φ̂_I. Passive: ∫ −rᵀ Z φ̃ ≥ −½ φ̃_I(0)ᵀ K_I⁻¹ φ̃_I(0) (docs/laws.md#landau-pi). F_p = 0 is the gradient law.
     """
+
+    kind = "landau_pi"
+    tuned = ("K_I", "F_p")
 
     p: int
     K_I: Any
@@ -144,6 +155,8 @@ class SwitchingSigma(Gradient):
     residual set (docs/laws.md#sigma-modification). The gradient law with a leak: its state, estimate and V are the
     gradient law's (½ φ̃ᵀ Γ⁻¹ φ̃).
     """
+
+    kind = "sigma"
 
     phi0: Any
     sigma0: Any = 1.0

@@ -18,7 +18,8 @@ assumptions can fail on a state (M̂ singular) has a guard, an indicator the loo
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
@@ -29,11 +30,12 @@ from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_vector
 from .geometry import Euclidean, Natural, adaptation_gains, geometry
+from .registry import Contender, Registered
 
 Array = Any
 
 
-class Law(Module, ABC):
+class Law(Registered, Module, ABC):
     """The base of every control law (docs/laws.md#model, docs/tutorial.md): a frozen dataclass holding constants only
     (its model, gains, initial estimate), a pytree whose gains are leaves (:mod:`robotadapt.pytree`). A law gives its
     torque and state derivative (`__call__`), its state's names and initial value and its estimate; every other part
@@ -60,11 +62,26 @@ class Law(Module, ABC):
 
     A law whose update reads the measured q̈ (Table 6.2.1) sets `needs_acceleration` and gives `torque` and `update`
     in place of `__call__`. The facts the simulator fixes before a run (whether the law has a guard, a delay line, a
-    passivity output, a torque filter) are read off which hooks the law overrides (:meth:`has`), once."""
+    passivity output, a torque filter) are read off which hooks the law overrides (:meth:`has`), once.
+
+    A law registers itself in its class body (:mod:`robotadapt.controllers.registry`): `kind` (its scenario kind and
+    `ra.<ClassName>`), `aliases`, `tuned` (the gains a fair comparison varies), and for the comparison
+    (:mod:`robotadapt.studies.compare`) its `lineup` entries, its gain `family` and the `powers` of the arm's scale
+    its gains carry."""
 
     model: RobotModel
     #: Table 6.2.1's split: `torque` needs no q̈, `update` takes the plant's q̈ for the torque just applied
     needs_acceleration: ClassVar[bool] = False
+    #: its entries in the comparison's lineup (none: it runs there only as a scenario's own law)
+    lineup: ClassVar[tuple[Contender, ...]] = ()
+    #: the comparison's gain family: the laws of one family take from the scenario's law the gains that play the same
+    #: part ("6": r = ė + Λe, chapter 6; "7.2": r = ė + e, §7.2); None: shares none
+    family: ClassVar[str | None] = None
+    #: the power of the arm's scale s each gain carries in the comparison: 1 for torque gains and adaptation gains
+    #: (φ scales as M, the regressor does not), none (a key not listed) for rates and options; the servo's and the
+    #: update law's gains of a passivity-based law are its own
+    powers: ClassVar[Mapping[str, int]] = MappingProxyType({"Kv": 1, "Kp": 1, "Ka": 1, "kL": 1, "kd": 1, "Gamma": 1,
+                                                            "P0": 1, "K_I": 1, "F_p": 1})
 
     def has(self, hook: str) -> bool:
         """Whether the law gives its own `hook` (a wrapper answers for what it wraps)."""

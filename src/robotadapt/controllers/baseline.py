@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -11,11 +12,14 @@ from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from .base import Array, Law, errors, estimate, gains
+from .registry import Contender
 
 
 @dataclass(frozen=True, eq=False)
 class _Fixed(Law):
     """Shared parts of controllers whose estimate φ̂ is a constant (no state)."""
+
+    tuned = ("Kp", "Kv")
 
     model: RobotModel
     Kp: Any
@@ -47,6 +51,11 @@ class _Fixed(Law):
 class PD(_Fixed):
     """τ = K_p e + K_v ė. No model knowledge; `phi_hat0` is only reported (pass zeros)."""
 
+    kind = "pd"
+    family = "6"
+    lineup = (Contender("pd", "PD", "baseline", "K_p = K_v Λ, K_v of Example 6.3.1", {"kind": "pd", "Kp": 25.0, "Kv": 10.0},
+                        rank=30),)
+
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         e, de = errors(q, dq, ref)
         return e @ self.Kp.T + de @ self.Kv.T, 0.0 * x + 0.0 * q[..., :0]
@@ -56,6 +65,11 @@ class PD(_Fixed):
 class PDGravity(_Fixed):
     """PD plus gravity and friction compensation with fixed estimates (Arimoto & Miyazaki; 6.3.5):
     τ = K_p e + K_v ė + Ĝ(q) + F̂(q̇). For a set point (q̇_d = 0) this is the book's (6.3.5), stable by LaSalle."""
+
+    kind = "pd_gravity"
+    family = "6"
+    lineup = (Contender("pd_gravity", "PD + gravity, fixed φ̂", "(6.3.5)", "K_p = K_v Λ, K_v of Example 6.3.1",
+                        {"kind": "pd_gravity", "Kp": 25.0, "Kv": 10.0}, rank=40),)
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         e, de = errors(q, dq, ref)
@@ -68,6 +82,11 @@ class ComputedTorque(_Fixed):
     """Computed torque with fixed estimates (6.2.2; Example 6.2.1):
     τ = M̂(q)(q̈_d + K_v ė + K_p e) + V̂_m q̇ + Ĝ + F̂ = Y(q, q̇, q̇, q̈_d + K_v ė + K_p e) φ̂.
     With φ̂ ≠ φ the error obeys ë + K_v ė + K_p e = M̂⁻¹ W φ̃ and stays bounded without decaying."""
+
+    kind = "computed_torque"
+    powers = MappingProxyType({})  # K_p, K_v act through M̂ (6.2.2): rates, whatever the arm's scale
+    lineup = (Contender("computed_torque", "computed torque, fixed φ̂", "(6.2.2)", "Example 6.2.1's K_p, K_v",
+                        {"kind": "computed_torque", "Kp": 4.0, "Kv": 4.0}, rank=20),)
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         e, de = errors(q, dq, ref)

@@ -13,6 +13,7 @@ from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar, scalar_gain
 from .base import Array, Law, errors, estimate, freeze, gains, slotine_li_products, slotine_li_regressor
+from .registry import Contender
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +45,13 @@ class Composite(Law):
     """
 
     per_run: ClassVar[tuple[str, ...]] = ("phi_hat0",)  # varies per run in one vectorized batch
+
+    kind = "composite"
+    tuned = ("Lam", "Kv", "P0")
+    family = "6"
+    lineup = (Contender("composite", "composite (least squares)", "Table 6.6.1",
+                        "Λ, K_v of Example 6.3.1; a = 1, P(0) = 10 I of Example 6.6.3",
+                        {"kind": "composite", "Lam": 2.5, "Kv": 10.0, "a": 1.0, "P0": 10.0}, rank=70),)
 
     model: RobotModel
     Lam: Any

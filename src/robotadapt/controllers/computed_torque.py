@@ -12,6 +12,7 @@ inputs, so numpy and JAX run the same code.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
@@ -22,6 +23,7 @@ from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_vector
 from .base import Array, EstimateState, errors, freeze, gains, positive_definite
+from .registry import Contender
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,6 +67,15 @@ class AdaptiveComputedTorque(EstimateState):
     per_run: ClassVar[tuple[str, ...]] = ("phi_hat0",)  # varies per run in one vectorized batch
 
     needs_acceleration: ClassVar[bool] = True  # the update reads the measured q̈ (6.2.19)
+
+    kind = "adaptive_computed_torque"
+    tuned = ("Kp", "Kv", "Gamma")
+    #: Γ of (6.2.19) carries M̂⁻¹, the box is φ's; K_p, K_v act through M̂ (6.2.5): rates, whatever the arm's scale
+    powers = MappingProxyType({"Gamma": 2, "phi_min": 1, "phi_max": 1})
+    lineup = (Contender("adaptive_computed_torque", "adaptive computed torque + projection", "Table 6.2.1",
+                        "Example 6.2.2; box [0.1, 10] (docs: laws.md#adaptive-computed-torque)",
+                        {"kind": "adaptive_computed_torque", "Kp": 125.0, "Kv": 50.0, "Gamma": 500.0, "phi_min": 0.1,
+                         "phi_max": 10.0}, rank=50),)
 
     model: RobotModel
     Kp: Any

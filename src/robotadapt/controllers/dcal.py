@@ -14,6 +14,7 @@ from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, scalar_gain
 from .base import Array, EstimateState, errors
+from .registry import Contender
 
 _MAX_TABLE_BYTES = 2e9
 
@@ -54,6 +55,13 @@ class DCAL(EstimateState):
     """
 
     per_run: ClassVar[tuple[str, ...]] = ("phi_hat0",)  # varies per run in one vectorized batch
+
+    kind = "dcal"
+    tuned = ("Kv", "Kp", "Ka", "Gamma")
+    family = "7.2"
+    lineup = (Contender("dcal", "DCAL", "Table 7.2.1", "Example 7.2.1",
+                        {"kind": "dcal", "Kv": 50.0, "Kp": 50.0, "Ka": 50.0, "Gamma": 20.0, "precompute": True}, rank=90,
+                        book_kv="Examples 7.2.1–7.2.2"),)
 
     model: RobotModel
     Kv: Any

@@ -9,6 +9,7 @@ from ..arrays import matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from .base import Array, EstimateState, errors, gains, slotine_li_products, slotine_li_regressor
+from .registry import Contender
 
 
 @dataclass(frozen=True, eq=False)
@@ -26,6 +27,13 @@ class InertiaRelated(EstimateState):
     """
 
     per_run: ClassVar[tuple[str, ...]] = ("Lam", "Kv", "Gamma", "phi_hat0")  # varies per run in one vectorized batch
+
+    kind = "slotine_li"
+    aliases = ("inertia_related",)  # the book's name, Table 6.3.1
+    tuned = ("Lam", "Kv", "Gamma")
+    family = "6"
+    lineup = (Contender("slotine_li", "Slotine–Li", "Table 6.3.1", "Example 6.3.1",
+                        {"kind": "slotine_li", "Lam": 2.5, "Kv": 10.0, "Gamma": 20.0}, rank=10, book_kv="Example 6.3.1"),)
 
     model: RobotModel
     Lam: Any

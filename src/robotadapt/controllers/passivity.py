@@ -30,6 +30,7 @@ from ..trajectories import Reference
 from ..validation import ConfigError, as_array, as_gain
 from .adaptation import UpdateLaw
 from .base import Array, Law, errors, estimate, freeze, gains
+from .registry import Contender, OfTruth
 
 _SERVO = "controller.servo"
 
@@ -50,6 +51,9 @@ class Servo(Module):
     :class:`PdServo` and :class:`PidServo` hold their gains, fix A and B by n and read D (and C) off the gains, so a
     gain set on a built servo (a traced one when `robotadapt tune` varies Λ or Ψ) is the D and C the law uses. Every
     servo checks at construction that H(s) = (sI + G(s))⁻¹ is stable (6.4.19)."""
+
+    #: the gains a fair comparison tunes (as a law's `tuned`, :mod:`robotadapt.controllers.registry`)
+    tuned: ClassVar[tuple[str, ...]] = ()
 
     D: Array
     A: Array
@@ -109,6 +113,8 @@ class PdServo(Servo):
     """K(s) = Λ s, i.e. G(s) = D = Λ in (6.4.2): r = ė + Λe, Slotine–Li as a member of the class (Example 6.4.2). No
     state."""
 
+    tuned = ("Lam",)
+
     n: int
     Lam: Any
     A: Array = field(init=False, repr=False, metadata={"internal": True})
@@ -129,6 +135,8 @@ class PidServo(Servo):
     """K(s) = Λ s + Ψ (Example 6.4.3 (3)), in (6.4.2) D = Λ, A = 0, B = I, C = Ψ: ξ = ε = ∫ e, r = ė + Λe + Ψε, so
     that K_v r is the PID law K_v ė + K_p e + K_I ∫e with K_p = K_v Λ, K_I = K_v Ψ; h_i(s) = s / (s² + λ_i s + ψ_i)
     (Example 6.4.3 (5))."""
+
+    tuned = ("Lam", "Psi")
 
     n: int
     Lam: Any
@@ -188,6 +196,21 @@ class PassivityBased(Law):
     """
 
     per_run: ClassVar[tuple[str, ...]] = ("phi_hat0",)  # varies per run in one vectorized batch
+
+    kind = "passivity"
+    tuned = ("Kv",)  # and its servo's and update law's own
+    family = "6"
+    lineup = (  # σ-modification: φ0 = 1.25 ‖φ‖ > ‖φ‖ (6.7.15); sigma-modification.toml's 3 is 1.23 ‖φ‖
+        Contender("passivity", "passivity: PID servo + gradient", "Table 6.4.1, Examples 6.4.1, 6.4.3", "Problem 6.4-1",
+                  {"kind": "passivity", "Kv": 10.0, "servo": {"kind": "pid", "Lam": 2.5, "Psi": 1.0},
+                   "law": {"kind": "gradient", "Gamma": 20.0}}, rank=60),
+        Contender("passivity_pi", "passivity: PID servo + Landau PI", "(6.4.20)–(6.4.21)", "Problem 6.4-2",
+                  {"kind": "passivity", "Kv": 10.0, "servo": {"kind": "pid", "Lam": 2.5, "Psi": 1.0},
+                   "law": {"kind": "landau_pi", "K_I": 20.0, "F_p": 2.0}}, rank=61),
+        Contender("sigma", "switching σ-modification", "(6.7.13)–(6.7.14)", "Example 6.3.1; φ0 = 1.25 ‖φ‖",
+                  {"kind": "passivity", "Kv": 10.0, "servo": {"kind": "pd", "Lam": 2.5},
+                   "law": {"kind": "sigma", "Gamma": 20.0, "phi0": OfTruth(1.25, norm=True)}}, rank=62),
+    )
 
     model: RobotModel
     servo: Servo

@@ -13,6 +13,7 @@ from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_scalar, as_vector, scalar_gain
 from .base import Array, Law, errors
+from .registry import Contender
 
 _MAX_TABLE_BYTES = 2.5e8  # beyond this, Y_d over one period is evaluated on line, not tabulated
 _CHUNK = 4096  # instants per vectorized regressor call while tabulating
@@ -89,6 +90,12 @@ class Repetitive(Law):
     With the saturation (Problem 7.2-4), bounds that contain u_d give ‖u_d − sat(û_d(t − T))‖ ≤ ‖u_d − û_d(t − T)‖,
     so the same V satisfies (7.2.47).
     """
+
+    kind = "repetitive"
+    tuned = ("Kv", "Kp", "Ka", "kL")
+    family = "7.2"
+    lineup = (Contender("repetitive", "repetitive (learning)", "Table 7.2.2", "Example 7.2.2; T = the trajectory's period",
+                        {"kind": "repetitive", "Kv": 50.0, "Kp": 50.0, "Ka": 50.0, "kL": 50.0}, rank=100),)
 
     model: RobotModel
     Kv: Any

@@ -19,6 +19,7 @@ from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_scalar, as_vector
 from .base import Array, Law, freeze
+from .registry import Contender
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,6 +50,11 @@ class SignRobust(Law):
     #: constants tuning leaves alone, with why (robotadapt.studies.gain_space.locate)
     untuned: ClassVar[dict[str, str]] = {"kd": "is set above the disturbance's bound (6.7.8), not tuned for the error; "
                                                "tune the base law's gains (controller.base.Kv, ...)"}
+    kind = "sign_robust"
+    family = "6"
+    lineup = (Contender("sign_robust", "Slotine–Li + k_d sgn(r)", "(6.7.6)", "Example 6.7.2 (k_d = 2.2)",
+                        {"kind": "sign_robust", "kd": 2.2, "boundary_layer": 0.0,
+                         "base": {"kind": "slotine_li", "Lam": 2.5, "Kv": 10.0, "Gamma": 20.0}}, rank=80),)
 
     model: RobotModel
     base: Any

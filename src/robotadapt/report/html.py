@@ -4,7 +4,7 @@ excitation analysis (§6.5; docs/laws.md#persistency-of-excitation).
 
 The comparison answers the book's open question (the comparison of the laws "remains to be investigated"): every
 controller of chapters 6–7 on the same arm, desired trajectory, disturbance, initial state and step, each with the gains
-the book (or a packaged scenario) gives it on the two-link arm (:data:`robotadapt.studies.compare.LINEUP`).
+the book (or a packaged scenario) gives it on the two-link arm (:func:`robotadapt.studies.compare.contenders`).
 """
 
 from __future__ import annotations

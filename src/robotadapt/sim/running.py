@@ -95,7 +95,7 @@ def fold_rows(acc: Running, rows: Array, ks: Array) -> Running:
     norm2, power = e2.sum(axis=-2), (tau * tau).sum(axis=-2)
     clipped = np.any(np.abs(commanded - tau) > 1e-9 * (1.0 + np.abs(commanded)), axis=-2)
     norm = np.sqrt(norm2)
-    any_ok = ok.any(axis=-1)
+    any_ok = np.asarray(ok.any(axis=-1))
     first_i, last_i = ok.argmax(axis=-1), ok.shape[-1] - 1 - ok[..., ::-1].argmax(axis=-1)
     ends = np.stack([norm2, power], axis=-2)  # (runs..., 2, steps)
 

@@ -4,20 +4,22 @@ the lineup, and one row of metrics per law (tables only; :mod:`robotadapt.report
 **The reference.** The scenario's own controller runs exactly as the scenario gives it, in place of the lineup entry of
 the same kinds (or as the entry "scenario" when none matches); its row says so (`reference`, and its source).
 
-**The other laws' gains.** `LINEUP` holds the book's gains, chosen for the book's two-link arm (λ_max M(0) = 12.15
-kg m² at Example 6.3.1's start). On the scenario's arm every other law takes
+**The lineup.** Each law declares its entries in its own class (`lineup`, :mod:`robotadapt.controllers.registry`),
+with the book's gains, chosen for the book's two-link arm (λ_max M(0) = 12.15 kg m² at Example 6.3.1's start), and
+its place (`rank`); :func:`contenders` gathers them in that order. On the scenario's arm every other law takes
 
-1. from the scenario's law each gain that plays the same part there: Γ of a gradient update φ̂̇ = Γ(·)ᵀr (Tables 6.3.1,
-   6.4.1, 7.2.1); Λ, K_v, Ψ, … of the chapter-6 laws, whose r = ė + Λe (6.3.8), (6.4.2); K_v, K_p, k_a, k_L of the
-   §7.2 laws, whose r = ė + e (7.2.6). PD's K_p is K_v Λ of what it got (Λ of Example 6.3.1 unless the scenario has one);
-2. every other gain the book's times s^k: s the arm's scale, k the power of the inertia the gain's unit carries
-   (`_POWER`): 1 for torque gains (K_v, K_p, k_a, k_L, k_d) and adaptation gains (Γ, P(0), K_I, F_p: φ scales as M, the
-   regressor does not) and for the projection box of Table 6.2.1; 2 for adaptive computed torque's Γ ((6.2.19) carries
-   M̂⁻¹); 0 for rates (Λ, Ψ, a) and computed torque's K_p, K_v (they act through M̂, (6.2.2), (6.2.5)). The scale is
-   s = λ_min(K_v) / k_v,book when the scenario's law has a K_v on r (k_v,book = 10 of Example 6.3.1 for the chapter-6
-   laws, 50 of Examples 7.2.1–7.2.2 for §7.2; λ_min, the rate of (6.3.17), so that no joint gets a larger factor than
-   the scenario gives it), else λ_max M(q0) / 12.15, the arm's inertia at its start over the book arm's. (k_d must
-   also exceed the scenario's disturbance, (6.7.8): not checked.)
+1. from the scenario's law each gain that plays the same part there, when both laws are of one `family`: Γ of a
+   gradient update φ̂̇ = Γ(·)ᵀr (Tables 6.3.1, 6.4.1, 7.2.1); Λ, K_v, Ψ, … of the chapter-6 laws ("6"), whose
+   r = ė + Λe (6.3.8), (6.4.2); K_v, K_p, k_a, k_L of the §7.2 laws ("7.2"), whose r = ė + e (7.2.6); computed torque's
+   laws share none. PD's K_p is K_v Λ of what it got (Λ of Example 6.3.1 unless the scenario has one);
+2. every other gain the book's times s^k: s the arm's scale, k the power of the inertia the gain's unit carries (the
+   law's `powers`): 1 for torque gains (K_v, K_p, k_a, k_L, k_d) and adaptation gains (Γ, P(0), K_I, F_p: φ scales as
+   M, the regressor does not) and for the projection box of Table 6.2.1; 2 for adaptive computed torque's Γ ((6.2.19)
+   carries M̂⁻¹); 0 for rates (Λ, Ψ, a) and computed torque's K_p, K_v (they act through M̂, (6.2.2), (6.2.5)). The
+   scale is s = λ_min(K_v) / k_v,book when the scenario's law has a K_v on r (k_v,book: the K_v of the family's entry
+   with a `book_kv`, 10 of Example 6.3.1 for the chapter-6 laws, 50 of Examples 7.2.1–7.2.2 for §7.2; λ_min, the rate
+   of (6.3.17), so that no joint gets a larger factor than the scenario gives it), else λ_max M(q0) / 12.15, the arm's
+   inertia at its start over the book arm's. (k_d must also exceed the scenario's disturbance, (6.7.8): not checked.)
 
 So on an arm whose M, V_m, G are s times the book arm's, with the scenario's K_v, Γ and φ̂(0) s times the book's, every
 law but composite adaptation (whose one P weighs a torque error and r alike, (6.6.28)) gives the book's e(t); on the
@@ -38,12 +40,13 @@ from __future__ import annotations
 import copy
 import re
 from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
 from ..analysis.metrics import metrics
 from ..analysis.monitors import convergence_time
+from ..controllers.registry import Contender, OfTruth, registered
 from ..grid import Grid
 from ..robots.base import RobotModel
 from ..robots.two_link import TwoLinkArm
@@ -51,75 +54,24 @@ from ..sim.integrators import Sampled, SolveIVP
 from ..sim.result import SimulationResult
 from ..validation import ConfigError, as_gain
 from .scenarios import Scenario
-from .scenarios.build import canonical_kind, keys, setup
+from .scenarios.build import NESTED, canonical_kind, constructor, keys, setup
 
-
-@dataclass(frozen=True, eq=False)
-class OfTruth:
-    """A lineup value derived from the true φ: `factor`·φ, or `factor`·‖φ‖ with `norm`."""
-
-    factor: float
-    norm: bool = False
-
-    def value(self, phi: np.ndarray) -> Any:
-        return self.factor * float(np.linalg.norm(phi)) if self.norm else (self.factor * phi).tolist()
-
-
-class Contender(NamedTuple):
-    label: str
-    reference: str  # the book's equations
-    gains: str  # where the gains come from
-    section: dict[str, Any]  # the scenario's [controller] table
-
-
-SIGMA_BOUND = OfTruth(1.25, norm=True)  # φ0 = 1.25 ‖φ‖ > ‖φ‖ (6.7.15); sigma-modification.toml's 3 is 1.23 ‖φ‖
-_SL = {"Lam": 2.5, "Kv": 10.0, "Gamma": 20.0}  # Example 6.3.1 [BT]
-_PID = {"kind": "pid", "Lam": 2.5, "Psi": 1.0}  # Problem 6.4-1 [P]
-# The comparison's controllers with the book's gains for the book's two-link arm (the module docstring says how they
-# follow another arm); the entry of the same kinds (controller, servo, law, base) as the scenario's own is replaced by it.
-LINEUP: dict[str, Contender] = {
-    "slotine_li": Contender("Slotine–Li", "Table 6.3.1", "Example 6.3.1", {"kind": "slotine_li", **_SL}),
-    "computed_torque": Contender("computed torque, fixed φ̂", "(6.2.2)", "Example 6.2.1's K_p, K_v",
-                                 {"kind": "computed_torque", "Kp": 4.0, "Kv": 4.0}),
-    "pd": Contender("PD", "baseline", "K_p = K_v Λ, K_v of Example 6.3.1", {"kind": "pd", "Kp": 25.0, "Kv": 10.0}),
-    "pd_gravity": Contender("PD + gravity, fixed φ̂", "(6.3.5)", "K_p = K_v Λ, K_v of Example 6.3.1",
-                            {"kind": "pd_gravity", "Kp": 25.0, "Kv": 10.0}),
-    "adaptive_computed_torque": Contender(
-        "adaptive computed torque + projection", "Table 6.2.1",
-        "Example 6.2.2; box [0.1, 10] (docs: laws.md#adaptive-computed-torque)",
-        {"kind": "adaptive_computed_torque", "Kp": 125.0, "Kv": 50.0, "Gamma": 500.0, "phi_min": 0.1, "phi_max": 10.0}),
-    "passivity": Contender("passivity: PID servo + gradient", "Table 6.4.1, Examples 6.4.1, 6.4.3", "Problem 6.4-1",
-                           {"kind": "passivity", "Kv": 10.0, "servo": _PID, "law": {"kind": "gradient", "Gamma": 20.0}}),
-    "passivity_pi": Contender("passivity: PID servo + Landau PI", "(6.4.20)–(6.4.21)", "Problem 6.4-2",
-                              {"kind": "passivity", "Kv": 10.0, "servo": _PID,
-                               "law": {"kind": "landau_pi", "K_I": 20.0, "F_p": 2.0}}),
-    "sigma": Contender("switching σ-modification", "(6.7.13)–(6.7.14)", "Example 6.3.1; φ0 = 1.25 ‖φ‖",
-                       {"kind": "passivity", "Kv": 10.0, "servo": {"kind": "pd", "Lam": 2.5},
-                        "law": {"kind": "sigma", "Gamma": 20.0, "phi0": SIGMA_BOUND}}),
-    "composite": Contender("composite (least squares)", "Table 6.6.1",
-                           "Λ, K_v of Example 6.3.1; a = 1, P(0) = 10 I of Example 6.6.3",
-                           {"kind": "composite", "Lam": 2.5, "Kv": 10.0, "a": 1.0, "P0": 10.0}),
-    "sign_robust": Contender("Slotine–Li + k_d sgn(r)", "(6.7.6)", "Example 6.7.2 (k_d = 2.2)",
-                             {"kind": "sign_robust", "kd": 2.2, "boundary_layer": 0.0,
-                              "base": {"kind": "slotine_li", **_SL}}),
-    "dcal": Contender("DCAL", "Table 7.2.1", "Example 7.2.1",
-                      {"kind": "dcal", "Kv": 50.0, "Kp": 50.0, "Ka": 50.0, "Gamma": 20.0, "precompute": True}),
-    "repetitive": Contender("repetitive (learning)", "Table 7.2.2", "Example 7.2.2; T = the trajectory's period",
-                            {"kind": "repetitive", "Kv": 50.0, "Kp": 50.0, "Ka": 50.0, "kL": 50.0}),
-}
-
-_BOOK_PHI = (0.8, 2.3)  # the book's two-link arm, m1, m2 (kg) [BT]: the arm LINEUP's gains were chosen for
-#: the family of each lineup kind: gains of one family play the same part (module docstring); "6.2", computed torque's,
-#: shares none
-_FAMILY = {"slotine_li": "6", "passivity": "6", "composite": "6", "sign_robust": "6", "pd": "6", "pd_gravity": "6",
-           "dcal": "7.2", "repetitive": "7.2", "computed_torque": "6.2", "adaptive_computed_torque": "6.2"}
+_BOOK_PHI = (0.8, 2.3)  # the book's two-link arm, m1, m2 (kg) [BT]: the arm the lineup's gains were chosen for
 #: the letters a law may take from the scenario's law of its family (Γ from either family of gradient laws)
 _SHARED = ("Lam", "Kv", "Kp", "Ka", "kL", "Gamma", "Psi", "a", "P0", "K_I", "F_p", "kd")
-#: the power of the arm's scale s a gain carries (module docstring); a key not listed carries none (rates, options)
-_POWER = {"Kv": 1, "Kp": 1, "Ka": 1, "kL": 1, "kd": 1, "Gamma": 1, "P0": 1, "K_I": 1, "F_p": 1}
-_CT_POWER = {"Gamma": 2, "phi_min": 1, "phi_max": 1}  # computed torque's: its K_p, K_v act through M̂
-#: k_v,book of each family, and where it is from: the denominator of s
-_BOOK_KV = {"6": ("Example 6.3.1", _SL["Kv"]), "7.2": ("Examples 7.2.1–7.2.2", LINEUP["dcal"].section["Kv"])}
+
+
+def contenders() -> dict[str, Contender]:
+    """The comparison's lineup: every registered law's entries (its `lineup`), by rank, then name."""
+    found = [c for law in registered("controller").values() for c in law.lineup]
+    return {c.name: c for c in sorted(found, key=lambda c: (c.rank, c.name))}
+
+
+def _books() -> dict[str, Contender]:
+    """Each family's entry whose K_v is k_v,book, the denominator of the arm's scale (module docstring)."""
+    return {law.family: c for law in registered("controller").values() for c in law.lineup if c.book_kv and law.family}
+
+
 _ARRAY = re.compile(r"\[(?:[-+0-9.,;:eE\s…]|inf|nan)*\]")  # an array's repr in a message: [1. 2.], [[0.1 …]]
 
 
@@ -174,13 +126,16 @@ class Row:
     metrics: dict[str, Any]
 
 
-def _kinds(section: Any) -> tuple[Any, ...]:
-    """A controller section's kind and the kinds of its servo, law and base (aliases by their registry name): what
-    identifies a lineup entry."""
+def _kinds(section: Any, registry: str = "controller") -> tuple[Any, ...]:
+    """A controller section's kind and the kinds of its servo, law and base, each by its registered name (an alias, or
+    a user's `"module:Class"` whose class registered a kind, by that kind): what identifies a lineup entry."""
     if not isinstance(section, dict):
         return (section,)
-    return ((canonical_kind("controller", section.get("kind")),)
-            + tuple(_kinds(section[k]) for k in ("servo", "law", "base") if k in section))
+    kind, law = canonical_kind(registry, section.get("kind")), _law(section, registry)
+    own = getattr(law, "kind", None) if getattr(law, "registry", None) == registry else None
+    if own is not None and registered(registry).get(own) is law:
+        kind = own
+    return (kind,) + tuple(_kinds(section[k], NESTED[k]) for k in NESTED if k in section)
 
 
 def _fill(section: Any, phi: np.ndarray | None) -> Any:
@@ -195,21 +150,33 @@ def _fill(section: Any, phi: np.ndarray | None) -> Any:
     return section.value(phi)
 
 
+def _law(section: Any, registry: str = "controller") -> Any:
+    """The class (or function) a section's kind names in `registry` (a user's `"module:Class"` too); None without one."""
+    if not isinstance(section, dict):
+        return None
+    try:
+        return constructor(registry, section.get("kind"), f"{registry}.kind")[0]
+    except ConfigError:
+        return None
+
+
 def _family(section: Any) -> str | None:
-    return _FAMILY.get(canonical_kind("controller", section.get("kind"))) if isinstance(section, dict) else None
+    return getattr(_law(section), "family", None)
 
 
-def _gains(section: dict[str, Any], family: str | None) -> list[tuple[tuple[str, ...], Any, int]]:
-    """(path, role, power) of each key of a controller section, its servo's, law's and base's: the role under which
-    it is shared with the laws of its family (None: its own) and the power of the arm's scale it carries."""
+def _gains(section: dict[str, Any], law: Any) -> list[tuple[tuple[str, ...], Any, int]]:
+    """(path, role, power) of each key of a controller section of `law`, its servo's, law's and base's: the role under
+    which it is shared with the laws of its family (None: its own) and the power of the arm's scale it carries (the
+    law's `powers`; a servo's and an update law's gains are the law's own)."""
     out: list[tuple[tuple[str, ...], Any, int]] = []
+    family, powers = getattr(law, "family", None), getattr(law, "powers", {})
     for key, value in section.items():
-        if key in ("servo", "law", "base") and isinstance(value, dict):
-            inner = _family(value) if key == "base" else family
+        if key in NESTED and isinstance(value, dict):
+            inner = _law(value) if key == "base" else law
             out += [((key, *path), role, power) for path, role, power in _gains(value, inner)]
-        elif family is not None:
-            role = None if family == "6.2" or key not in _SHARED else ("Γ" if key == "Gamma" else family, key)
-            out.append(((key,), role, (_CT_POWER if family == "6.2" else _POWER).get(key, 0)))
+        elif law is not None:
+            role = None if family is None or key not in _SHARED else ("Γ" if key == "Gamma" else family, key)
+            out.append(((key,), role, powers.get(key, 0)))
     return out
 
 
@@ -264,9 +231,10 @@ class _Arm:
         s, own = base.setup, base.data["controller"]
         model: RobotModel = s.controller.model
         family = _family(own)
-        shared = {role: _at(own, path) for path, role, _ in _gains(own, family) if role is not None}
-        if family in _BOOK_KV and (family, "Kv") in shared:
-            source, book = _BOOK_KV[family]
+        shared = {role: _at(own, path) for path, role, _ in _gains(own, _law(own)) if role is not None}
+        entry = _books().get(family) if family is not None else None
+        if entry is not None and (family, "Kv") in shared:
+            source, book = entry.book_kv, entry.section["Kv"]
             low = float(np.linalg.eigvalsh(as_gain(shared[family, "Kv"], model.n, "controller.Kv")).min())
             scale, why = low / book, f"the scenario's λ_min(K_v) = {low:.4g} over {source}'s {book:g}"
         else:
@@ -313,7 +281,7 @@ def _contender(arm: _Arm, c: Contender) -> tuple[str, dict[str, Any], list[str]]
     derived = section["kind"] in ("pd", "pd_gravity") and ("6", "Kp") not in arm.shared  # K_p = K_v Λ
     taken: list[str] = []
     scaled: list[str] = []
-    for path, role, power in _gains(section, _family(section)):
+    for path, role, power in _gains(section, _law(section)):
         book = _at(section, path)
         if role in arm.shared:
             value, changed = arm.shared[role], taken
@@ -325,7 +293,7 @@ def _contender(arm: _Arm, c: Contender) -> tuple[str, dict[str, Any], list[str]]
             _put(section, path, value)
             changed.append(".".join(path))
     if derived:
-        Kp = _product(section["Kv"], arm.shared.get(("6", "Lam"), _SL["Lam"]), arm.model.n)
+        Kp = _product(section["Kv"], arm.shared.get(("6", "Lam"), _books()["6"].section["Lam"]), arm.model.n)
         if not _same(Kp, section["Kp"]):
             section["Kp"] = Kp
             (taken if {("6", "Kv"), ("6", "Lam")} & arm.shared.keys() else scaled).append("Kp = K_v Λ")
@@ -370,12 +338,13 @@ def _entry(base: Scenario, name: str, label: str, source: str, section: dict[str
 
 def lineup(base: Scenario, names: list[str] | None = None) -> tuple[list[Entry], dict[str, str]]:
     """The comparison's entries on `base`'s arm, trajectory, disturbance, initial state and step, and the lineup names
-    that do not apply (with why, one line each). `names` defaults to all of `LINEUP`; the scenario's own controller is
-    the reference, in place of the lineup entry of the same kinds or as "scenario"; the other laws' gains and initial
-    estimate follow the scenario (module docstring)."""
+    that do not apply (with why, one line each). `names` defaults to all of :func:`contenders`; the scenario's own
+    controller is the reference, in place of the lineup entry of the same kinds or as "scenario"; the other laws' gains
+    and initial estimate follow the scenario (module docstring)."""
     own = base.data["controller"]
-    match = next((n for n, c in LINEUP.items() if _kinds(c.section) == _kinds(own)), None)
-    known = list(LINEUP) + ([] if match else ["scenario"])
+    every = contenders()
+    match = next((n for n, c in every.items() if _kinds(c.section) == _kinds(own)), None)
+    known = list(every) + ([] if match else ["scenario"])
     for name in names or ():
         if name not in known:
             raise ConfigError("--controllers", f"unknown controller {name!r}; choose from {', '.join(known)}")
@@ -384,12 +353,12 @@ def lineup(base: Scenario, names: list[str] | None = None) -> tuple[list[Entry],
     for name in dict.fromkeys(known if names is None else names):
         try:
             if name in (match, "scenario"):
-                c = LINEUP.get(name)
+                c = every.get(name)
                 label = c.label if c else f"the scenario's {own.get('kind')}"
                 source = f"{c.reference + '; ' if c else ''}gains: the scenario's (the reference, run as it is given)"
                 entries.append(_entry(base, name, label, source, copy.deepcopy(own), [], reference=True))
             else:
-                entries.append(_entry(base, name, LINEUP[name].label, *_contender(arm, LINEUP[name])))
+                entries.append(_entry(base, name, every[name].label, *_contender(arm, every[name])))
         except ConfigError as exc:
             if names is not None:
                 raise ConfigError("--controllers", f"{name} does not apply here: {brief(exc)}") from None
@@ -430,22 +399,20 @@ def compare(base: Scenario, names: list[str] | None = None, progress: bool = Fal
     return rows, skipped
 
 
-#: the gains a fair comparison tunes, where a law has them (the book's letters; `robotadapt.studies.tune.locate`
-#: refuses those a law derives other constants from that it cannot recompute from a traced gain)
-TUNED_GAINS = ("Lam", "Kv", "Kp", "Ka", "Gamma", "P0", "K_I", "F_p", "Psi", "kL")
-
-
 def tunable(scenario: Scenario) -> list[str]:
-    """The fields of `TUNED_GAINS` in the scenario's controller (its servo, law and base too) that tuning accepts."""
+    """The gains a fair comparison tunes in the scenario's controller: those its law lists in `tuned`, its servo's,
+    update law's and base's by theirs, that tuning accepts (`robotadapt.studies.gain_space.locate` refuses those a law
+    derives other constants from that it cannot recompute from a traced gain)."""
     from .gain_space import locate
 
-    def fields(section: Any, prefix: str) -> list[str]:
-        out = [f"{prefix}.{k}" for k in section if k in TUNED_GAINS]
-        return out + [f for k in ("servo", "law", "base") if isinstance(section.get(k), dict)
-                      for f in fields(section[k], f"{prefix}.{k}")]
+    def fields(section: Any, prefix: str, registry: str) -> list[str]:
+        tuned = getattr(_law(section, registry), "tuned", ())
+        out = [f"{prefix}.{k}" for k in section if k in tuned]
+        return out + [f for k in NESTED if isinstance(section.get(k), dict)
+                      for f in fields(section[k], f"{prefix}.{k}", NESTED[k])]
 
     found = []
-    for name in fields(scenario.data["controller"], "controller"):
+    for name in fields(scenario.data["controller"], "controller", "controller"):
         try:
             locate(scenario, name)
         except ConfigError:
@@ -486,7 +453,7 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
                                   f"{period:.4g} s: the law learns nothing (û_d(t − T) = 0 throughout)")
             fields = tunable(entry.scenario)
             if not fields:
-                raise ConfigError("controller", "no gain of this law can be tuned")
+                raise ConfigError("controller", "no gain of this law can be tuned (a law lists them in its `tuned`)")
             tuned = tune(entry.scenario, fields, objective, max_torque, max_runs=max_runs)
         except ConfigError as exc:
             note = "; ".join(filter(None, (entry.note, f"lineup gains: not tuned ({brief(exc)})")))

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from ...controllers.registry import aliases as law_aliases
+from ...controllers.registry import registered
 from ...plant.actuators import Actuator, DCMotor
 from ...plant.mujoco import MujocoPlant, with_options
 from ...plant.plant import Plant, sinusoidal_disturbance
@@ -30,8 +32,9 @@ from ...sim.integrators import RK4, Sampled, SolveIVP, check_backend
 from ...validation import ConfigError, as_array, as_scalar, as_vector, check_names
 
 # kind → "module:attribute" (imported on use, so optional parts cost nothing until named) and what the constructor
-# takes first: the robot model, the joint count n, the parameter count p, or nothing.
-REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
+# takes first (the robot model, the joint count n, the parameter count p, or nothing), for the kinds that are not laws;
+# a law and an update law declare their kind in their own class (robotadapt.controllers.registry: LAWS)
+TARGETS: dict[str, dict[str, tuple[str, str | None]]] = {
     "robot": {
         "one_link": ("robots.one_link:OneLinkArm", None),
         "two_link": ("robots.two_link:TwoLinkArm", None),
@@ -50,31 +53,16 @@ REGISTRY: dict[str, dict[str, tuple[str, str | None]]] = {
         "quintic": ("trajectories:quintic", "n"),
         "constant": ("trajectories:constant", "n"),
     },
-    "controller": {
-        "slotine_li": ("controllers.inertia_related:InertiaRelated", "model"),
-        "computed_torque": ("controllers.baseline:ComputedTorque", "model"),
-        "pd": ("controllers.baseline:PD", "model"),
-        "pd_gravity": ("controllers.baseline:PDGravity", "model"),
-        "adaptive_computed_torque": ("controllers.computed_torque:AdaptiveComputedTorque", "model"),
-        "passivity": ("controllers.passivity:PassivityBased", "model"),
-        "composite": ("controllers.composite:Composite", "model"),
-        "sign_robust": ("controllers.robust:SignRobust", "model"),
-        "dcal": ("controllers.dcal:DCAL", "model"),
-        "repetitive": ("controllers.repetitive:Repetitive", "model"),
-    },
     "servo": {
         "pd": ("controllers.passivity:pd_servo", "n"),
         "pid": ("controllers.passivity:pid_servo", "n"),
         "state_space": ("controllers.passivity:state_space_servo", "n"),
     },
-    "law": {
-        "gradient": ("controllers.adaptation:Gradient", "p"),
-        "landau_pi": ("controllers.adaptation:LandauPI", "p"),
-        "sigma": ("controllers.adaptation:SwitchingSigma", "p"),
-    },
 }
-# other names of a kind: the same constructor (the book calls Slotine–Li's law the inertia-related one, Table 6.3.1)
-ALIASES: dict[str, dict[str, str]] = {"controller": {"inertia_related": "slotine_li"}}
+#: the registries whose kinds register themselves, their classes' `kind` and `aliases`
+LAWS = ("controller", "law")
+#: every registry, in the order of docs/keys.md
+REGISTRIES = ("robot", "trajectory", "controller", "servo", "law")
 # keys whose value is itself a table with a kind, and the registry it names
 NESTED = {"servo": "servo", "law": "law", "base": "controller"}
 # the field prefix each registry's constructors write in their errors (rewritten to the nested path when nested)
@@ -117,18 +105,33 @@ def _user_module(module: str, name: str) -> Any:
     return sys.modules[module]
 
 
+def kinds(registry: str) -> list[str]:
+    """The kinds `registry` knows by name, in order: a law's (`LAWS`) every registered one (a user's module's too, once
+    imported), the others those of `TARGETS`."""
+    return list(registered(registry)) if registry in LAWS else list(TARGETS[registry])
+
+
+def aliases(registry: str) -> dict[str, str]:
+    """Other name → kind (`inertia_related` → `slotine_li`: the book calls Slotine–Li's law the inertia-related one,
+    Table 6.3.1), from the laws' `aliases`."""
+    return law_aliases(registry) if registry in LAWS else {}
+
+
 def constructor(registry: str, kind: Any, name: str) -> tuple[Callable[..., Any], str | None]:
     """The constructor `kind` names in `registry` and what it takes first (the model, n, p or nothing): a packaged kind
-    of `REGISTRY` (or an alias), or a user's `"module:attribute"` (a class or function of an importable module, e.g.
+    (:func:`kinds`, or an alias), or a user's `"module:attribute"` (a class or function of an importable module, e.g.
     `"deadzone:DeadZoneSlotineLi"`, taking first what the registry's packaged kinds take, `USER_FIRST`; docs/tutorial.md).
     `name` is the field an error names (`controller.kind`)."""
-    table = REGISTRY[registry]
     kind = canonical_kind(registry, kind)
-    if isinstance(kind, str) and kind in table:
-        target, first = table[kind]
+    if registry in LAWS:
+        law = registered(registry).get(kind) if isinstance(kind, str) else None
+        if law is not None:
+            return law, law.first
+    elif isinstance(kind, str) and kind in TARGETS[registry]:
+        target, first = TARGETS[registry][kind]
         return _resolve(target), first
     if not (isinstance(kind, str) and kind.count(":") == 1 and all(kind.split(":"))):
-        known = sorted([*table, *ALIASES.get(registry, {})])
+        known = sorted([*kinds(registry), *aliases(registry)])
         raise ConfigError(name, f"expected one of {', '.join(known)}, or \"module:Class\" for your own; got {kind!r}")
     module, attr = kind.split(":")
     obj: Any = _user_module(module, name)
@@ -211,7 +214,7 @@ def _with_defaults(section: dict[str, Any], defaults: dict[str, Any]) -> dict[st
 
 def canonical_kind(registry: str, kind: Any) -> Any:
     """The registry's own name of `kind` (`inertia_related` → `slotine_li`); any other value as it is."""
-    return ALIASES.get(registry, {}).get(kind, kind) if isinstance(kind, str) else kind
+    return aliases(registry).get(kind, kind) if isinstance(kind, str) else kind
 
 
 def _names(names: tuple[str, ...] | list[str], shown: int = 8) -> str:
@@ -236,10 +239,11 @@ def per_parameter(value: Any, model: RobotModel, field: str, *, broadcast: bool)
 
 
 def build(registry: str, section: Any, name: str, model: RobotModel | None = None) -> Any:
-    """Call the constructor that `section['kind']` names in `REGISTRY[registry]` with the section's other keys; nested
-    tables (servo, law, base) are built first. `phi_hat0` defaults to zeros; a plain number is that value for all."""
+    """Call the constructor that `section['kind']` names in `registry` (:func:`constructor`) with the section's other
+    keys; nested tables (servo, law, base) are built first. `phi_hat0` defaults to zeros; a plain number is that value
+    for all."""
     if not isinstance(section, dict):
-        raise ConfigError(name, f"expected a table with a kind ({', '.join(sorted(REGISTRY[registry]))}), got {section!r}")
+        raise ConfigError(name, f"expected a table with a kind ({', '.join(sorted(kinds(registry)))}), got {section!r}")
     ctor, first = constructor(registry, section.get("kind"), f"{name}.kind")
     params = _params(ctor, first)
     keys = {k: v for k, v in section.items() if k != "kind"}
