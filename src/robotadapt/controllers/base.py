@@ -119,6 +119,20 @@ class Law(Registered, Module, ABC):
         `__call__`."""
         return self(t, x, q, dq, ref)[1]
 
+    def respond(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference,
+                apply: Callable[[Array], tuple[Array, Any, Any]]) -> tuple[Array, Array, Array, Any]:
+        """The law inside a loop, in Table 6.2.1's order: τ, then `apply(τ)` — the loop's (u, the torque the plant
+        receives; q̈ measured under it, or None; anything else the loop keeps) — then dx/dt: `update` with that q̈ for
+        a law with `needs_acceleration`, else `__call__`'s, told u through `applied`. Returns (τ, u, dx/dt, the rest):
+        the one call of a law in the continuous loop and the sampled tick alike."""
+        if self.needs_acceleration:
+            tau = self.torque(t, x, q, dq, ref)
+            u, ddq, rest = apply(tau)
+            return tau, u, self.update(t, x, q, dq, ddq, ref), rest
+        tau, dx = self(t, x, q, dq, ref)
+        u, _, rest = apply(tau)
+        return tau, u, self.applied(dx, tau, u), rest
+
     def guard(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array | None:
         """True where the law's assumption holds at (x, q), a boolean of shape `x.shape[:-1]`; None: it always holds.
         Raises nothing (traced arrays cannot raise): the torque or update is NaN where it fails, and the loop stops

@@ -49,19 +49,15 @@ class ClosedLoop(Module):
     controller: Any  # a Law (one with needs_acceleration: its torque, then its update with the plant's q̈)
     n: int
     monitored: bool = False
-    needs_acceleration: bool = field(init=False)
     m: int = field(init=False)  # the plant's state size, 2n + its extra states
     rigid: bool = field(init=False)  # no extra plant states: the fast path
-    filters_torque: bool = field(init=False)  # the law filters the applied torque, and an actuator may change it
     guarded: bool = field(init=False)  # the law has a guard, which traced evaluations read
     w: int = field(init=False)  # how many monitor values trail the state (0, or 2: the passivity integral, its min)
     unguarded: int = field(init=False)  # trailing entries the guard skips: w and the law's own records (`records`)
 
     def __post_init__(self) -> None:  # the law's static facts, read once, not per evaluation
         ctrl = as_law(self.controller)
-        object.__setattr__(self, "needs_acceleration", ctrl.needs_acceleration)
         object.__setattr__(self, "guarded", ctrl.has("guard"))
-        object.__setattr__(self, "filters_torque", ctrl.has("applied") and self.plant.actuator is not None)
         object.__setattr__(self, "m", 2 * self.n + self.plant.n_extra)
         object.__setattr__(self, "rigid", self.plant.n_extra == 0)
         passive = self.monitored and ctrl.has("regressor")  # a passivity output
@@ -97,9 +93,7 @@ class ClosedLoop(Module):
     def torque(self, t: Array, z: Array, ref: Reference) -> Array:
         """The controller's commanded torque (before the actuator's saturation)."""
         q, dq, x = self.split(z)
-        if self.needs_acceleration:
-            return self.controller.torque(t, x, q, dq, ref)
-        return self.controller(t, x, q, dq, ref)[0]
+        return self.controller.torque(t, x, q, dq, ref)
 
     def _plant(self, t: Array, z: Array, q: Array, dq: Array, u: Array) -> tuple[Array, Array]:
         """(the plant's ds/dt without q̇, q̈) for the applied torque."""
@@ -119,17 +113,13 @@ class ClosedLoop(Module):
         q, dq, x = self.split(z)
         xp = array_namespace(z)
         ok = self.controller.guard(t, x, q, dq, ref)
-        if self.needs_acceleration:
-            tau = self.controller.torque(t, x, q, dq, ref)
+
+        def apply(tau: Array) -> tuple[Array, Array, tuple[Array, Array]]:  # the plant under the torque it receives
             u = self.plant.saturate(tau)
             head, ddq = self._plant(t, z, q, dq, u)
-            dx = self.controller.update(t, x, q, dq, ddq, ref)
-        else:
-            tau, dx = self.controller(t, x, q, dq, ref)
-            u = self.plant.saturate(tau)
-            if self.filters_torque:
-                dx = self.controller.applied(dx, tau, u)
-            head, ddq = self._plant(t, z, q, dq, u)
+            return u, ddq, (head, ddq)
+
+        tau, u, dx, (head, ddq) = self.controller.respond(t, x, q, dq, ref, apply)
         parts = [head, ddq, dx] if self.rigid else [head, dx]
         if self.w:  # the running minimum is constant within a step and updated after it (after_step)
             d = self.dissipation(t, x, q, dq, ref)[..., None]

@@ -175,14 +175,12 @@ class Tick(Module):
             x, store = ctrl.sample(t, x, q_m, dq_m, ref, array_namespace(line).asarray(line[slot], copy=True))
             line = ring_write(line, slot, store)
         ok = ctrl.guard(t, x, q_m, dq_m, ref)
-        if self.loop.needs_acceleration:
-            tau = ctrl.torque(t, x, q_m, dq_m, ref)
+
+        def apply(tau: Array) -> tuple[Array, Array, Any]:  # the actuator's torque; q̈ as the sensor measured it
             u, actuator = self.actuator.apply(carry.actuator, tau, Ts)
-            dx = ctrl.update(t, x, q_m, dq_m, ddq_m, ref)
-        else:
-            tau, dx = ctrl(t, x, q_m, dq_m, ref)
-            u, actuator = self.actuator.apply(carry.actuator, tau, Ts)
-            dx = ctrl.applied(dx, tau, u)  # a law that filters the torque is given the held u_k
+            return u, ddq_m, actuator
+
+        tau, u, dx, actuator = ctrl.respond(t, x, q_m, dq_m, ref, apply)  # a torque filter is given the held u_k
         dw = self.loop.dissipation(t, x, q_m, dq_m, ref)[..., None] if self.loop.w else None
         return carry._replace(x=x, sensor=sensor, actuator=actuator, line=line), Sample(q_m, dq_m, ddq_m, tau, u, dx,
                                                                                         ok, dw)
@@ -222,11 +220,8 @@ class Tick(Module):
             h = opts.control_period
             return ctrl.project(ctrl.step(x, sample.dx, h)), None, None
 
-        def rate(_t: Any, y: Array) -> Array:
-            if self.loop.needs_acceleration:
-                return ctrl.update(t, y, q, dq, ddq, ref)
-            tau, dy = ctrl(t, y, q, dq, ref)
-            return ctrl.applied(dy, tau, sample.u)
+        def rate(_t: Any, y: Array) -> Array:  # every input held at its sample, u_k and the measured q̈ too
+            return ctrl.respond(t, y, q, dq, ref, lambda _tau: (sample.u, ddq, None))[2]
 
         xp = array_namespace(x)
         if sample.ok is None:
