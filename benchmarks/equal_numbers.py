@@ -221,9 +221,10 @@ def difference(a: Any, b: Any) -> float | None:
     return float(rel.max())
 
 
-def compare_variant(a: Path, b: Path, keys: list[str] | None = None) -> tuple[str, float, str]:
+def compare_variant(a: Path, b: Path, keys: list[str] | None = None, skip: tuple[str, ...] = ()) -> tuple[str, float, str]:
     """(group, max rel, what is worst or missing) of one variant's folders; `keys`: only these metrics.json keys (two
-    captures logged at different rates: the metrics every step folds), no result.npz."""
+    captures logged at different rates: the metrics every step folds), no result.npz; `skip`: every key but these
+    metrics.json keys (result.npz included)."""
     sa, sb = (json.loads((d / "status.json").read_text()) for d in (a, b))
     if sa["status"] != "ran" or sb["status"] != "ran":
         if sa["status"] == sb["status"] == "refused":
@@ -232,7 +233,7 @@ def compare_variant(a: Path, b: Path, keys: list[str] | None = None) -> tuple[st
     leaves = []
     ma, mb = (_flatten(json.loads((d / "metrics.json").read_text())) for d in (a, b))
     leaves += [(f"metrics:{k}", ma.get(k), mb.get(k), k in ma and k in mb) for k in sorted(ma.keys() | mb.keys())
-               if k not in WALL_CLOCK and (keys is None or k.split(".")[0].split("[")[0] in keys)]
+               if k not in WALL_CLOCK and (keys is None or _top(k) in keys) and _top(k) not in skip]
     if keys is None:
         with np.load(a / "result.npz") as ra_, np.load(b / "result.npz") as rb_:
             na, nb = dict(ra_), dict(rb_)
@@ -247,14 +248,19 @@ def compare_variant(a: Path, b: Path, keys: list[str] | None = None) -> tuple[st
     return ("equal" if worst <= EQUAL else "small" if worst <= SMALL else "large"), worst, where
 
 
-def compare(a_dir: Path, b_dir: Path, keys: list[str] | None = None) -> int:
+def _top(key: str) -> str:
+    """The metrics.json key a flattened key belongs to (`max_abs_torque[1]` → `max_abs_torque`)."""
+    return key.split(".")[0].split("[")[0]
+
+
+def compare(a_dir: Path, b_dir: Path, keys: list[str] | None = None, skip: tuple[str, ...] = ()) -> int:
     """Print one row per variant and the count per group; 1 if any variant is large or missing."""
     names = sorted({p.parent.name for d in (a_dir, b_dir) for p in d.glob("*/status.json")})
     rows = []
     for name in names:
         a, b = a_dir / name, b_dir / name
         if (a / "status.json").exists() and (b / "status.json").exists():
-            rows.append((name, *compare_variant(a, b, keys)))
+            rows.append((name, *compare_variant(a, b, keys, skip)))
         else:
             rows.append((name, "missing", math.nan, f"only in {a_dir if (a / 'status.json').exists() else b_dir}"))
     width = max((len(r[0]) for r in rows), default=7)
@@ -281,6 +287,7 @@ def main() -> int:
     cmp.add_argument("a", type=Path, metavar="A_DIR")
     cmp.add_argument("b", type=Path, metavar="B_DIR")
     cmp.add_argument("--keys", help="compare only these metrics.json keys (comma-separated), no result.npz")
+    cmp.add_argument("--skip", default="", help="compare everything but these metrics.json keys (comma-separated)")
     work = sub.add_parser("_worker")  # internal: one scenario's variants in a fresh interpreter
     work.add_argument("out", type=Path)
     work.add_argument("jobs", type=json.loads)
@@ -288,7 +295,8 @@ def main() -> int:
     if args.command == "capture":
         return capture(args.out, args.src, args.only, args.jobs, args.set)
     if args.command == "compare":
-        return compare(args.a, args.b, None if args.keys is None else args.keys.split(","))
+        return compare(args.a, args.b, None if args.keys is None else args.keys.split(","),
+                       tuple(filter(None, args.skip.split(","))))
     worker(args.out, [(variant, scenario, list(overrides)) for variant, scenario, overrides in args.jobs])
     return 0
 
