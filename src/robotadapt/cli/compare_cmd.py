@@ -8,13 +8,25 @@ from pathlib import Path
 from .common import add_figure_arguments, add_scenario_arguments, figure_format, overrides
 
 
+class _Help(argparse.HelpFormatter):
+    """The help with the lineup's names filled in, read from the registered laws only when the help is printed."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = super()._get_help_string(action)
+        if text is not None and "{lineup}" in text:
+            from ..studies.compare import contenders
+
+            text = text.replace("{lineup}", ", ".join(contenders()))
+        return text
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    compare = sub.add_parser("compare", help="compare controllers on one scenario; write report.html and comparison.json")
+    compare = sub.add_parser("compare", help="compare controllers on one scenario; write report.html and comparison.json",
+                             formatter_class=_Help)
     add_scenario_arguments(compare)
     compare.add_argument("--controllers", metavar="A,B,C",
-                         help="comma-separated names of the lineup (each law's own entries, "
-                              "robotadapt.studies.compare.contenders), e.g. slotine_li,dcal,repetitive (default: every "
-                              "controller that applies; an unknown name lists them all)")
+                         help="comma-separated names of the lineup: {lineup} (default: every one that applies to "
+                              "the scenario)")
     compare.add_argument("--fair", action="store_true",
                          help="tune every law's own gains to the same --objective under the same --max-torque first "
                               "(robotadapt tune), then compare; laws that cannot be differentiated keep the lineup's "

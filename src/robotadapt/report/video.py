@@ -141,12 +141,3 @@ def save_video(result: SimulationResult, plant: MujocoPlant, path: Path, fps: fl
     imageio.mimwrite(partial, images, fps=fps, codec="libx264", macro_block_size=8)
     os.replace(partial, path)
     return path
-
-
-def save_frame(result: SimulationResult, plant: MujocoPlant, path: Path, t: float) -> Path:
-    """The movie's frame at time t (s) as a PNG, for a page."""
-    from PIL import Image
-
-    image = frames(result, plant, [t])[0]
-    atomic_write(path, lambda f: Image.fromarray(image).save(f, format="PNG"), binary=True)
-    return path

@@ -570,12 +570,12 @@ def identified(value: dict[str, Any], model: RobotModel, where: str) -> list[flo
 
 def setup(data: dict[str, Any]) -> Setup:
     """Build every object of a scenario (already parsed TOML), validating each field once."""
-    missing = [name for name in ("robot", "plant", "trajectory", "controller", "simulation") if name not in data]
+    missing = [name for name in ("robot", "trajectory", "controller", "simulation") if name not in data]
     if missing:
         raise ConfigError(missing[0] if len(missing) == 1 else "scenario",
                           f"missing section{'s' if len(missing) > 1 else ''} {', '.join(f'[{m}]' for m in missing)}")
     model = robot(data["robot"])
-    the_plant, q0, dq0, plant_data = plant(data["plant"], model, data["robot"])
+    the_plant, q0, dq0, plant_data = plant(data.get("plant", {}), model, data["robot"])  # every key has a default
     t_final, integ, log_every, max_state, sim_data = simulation(data["simulation"])
     controller = build("controller", _truth_tables(data["controller"], the_plant, model), "controller", model)
     trajectory = build("trajectory", data["trajectory"], "trajectory", model)

@@ -1,0 +1,57 @@
+"""A newcomer's first day (issue "A newcomer's first day, third pass"): the pages one can find, a scenario without an
+empty [plant], the lineup's names in `compare --help`."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from robotadapt.cli import main
+from robotadapt.studies.compare import contenders
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_the_own_arm_page_is_linked_from_the_readme_and_the_docs_home() -> None:
+    assert "(docs/own-arm.md)" in (ROOT / "README.md").read_text()
+    assert "(own-arm.md)" in (ROOT / "docs" / "index.md").read_text()
+
+
+def test_the_own_arm_pages_cross_references_are_links() -> None:
+    text = (ROOT / "docs" / "own-arm.md").read_text()
+    plain = [m.group(0) for m in re.finditer(r"(?<!\[)docs/[a-z0-9_-]+\.md(#[a-z0-9_-]+)?(?!\]\()", text)]
+    assert not plain, f"plain-text references: {plain}"
+    assert len(re.findall(r"\]\([a-z0-9_-]+\.md", text)) >= 5
+
+
+def test_a_scenario_needs_no_plant_section_when_every_plant_key_has_a_default(tmp_path: Path,
+                                                                                capsys: pytest.CaptureFixture) -> None:
+    path = tmp_path / "arm.toml"
+    path.write_text('[robot]\nkind = "planar"\nn_links = 2\n\n[trajectory]\nkind = "sinusoid"\n\n[controller]\n'
+                    'kind = "slotine_li"\nLam = 2.5\nKv = 10\nGamma = 20\n\n[simulation]\nt_final = 0.05\n')
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    assert (tmp_path / "out" / "metrics.json").is_file()
+
+
+def test_a_missing_true_phi_without_a_plant_section_is_one_line_naming_the_key(tmp_path: Path,
+                                                                                 capsys: pytest.CaptureFixture) -> None:
+    path = tmp_path / "arm.toml"
+    path.write_text('[robot]\nkind = "two_link"\n\n[trajectory]\nkind = "sinusoid"\n\n[controller]\n'
+                    'kind = "slotine_li"\nLam = 2.5\nKv = 10\nGamma = 20\nphi_hat0 = [0, 0]\n\n[simulation]\n'
+                    't_final = 0.05\n')
+    assert main(["run", str(path), "--out", str(tmp_path / "out"), "--no-plots"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "plant.phi" in err[0]
+
+
+def test_compare_help_lists_every_lineup_name(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit):
+        main(["compare", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    names = list(contenders())
+    assert len(names) >= 12
+    listed = text.split("names of the lineup:")[1]
+    for name in names:
+        assert re.search(rf"\b{name}\b", listed.replace(",", " ")), name
