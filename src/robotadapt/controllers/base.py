@@ -29,7 +29,7 @@ from ..pytree import Module, derived
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_vector
-from .geometry import Euclidean, Natural, adaptation_gains, geometry
+from .geometry import Euclidean, Natural, Pullback, adaptation_gains, geometry, pullback_reference
 from .registry import Contender, Registered
 
 Array = Any
@@ -262,26 +262,32 @@ def estimate(obj: Any, name: str = "phi_hat0") -> None:
 
 class EstimateState(Law):
     """The state of a law that adapts φ̂ with a gain (Slotine–Li, adaptive computed torque, DCAL: Tables 6.3.1, 6.2.1,
-    7.2.1): the book's Euclidean update with Γ (state x = φ̂), or `adaptation = "natural"` with the scalar γ (state:
-    log-Cholesky coordinates of each link's pseudo-inertia, :mod:`robotadapt.controllers.geometry`). A mixin of the
-    laws' dataclasses, which hold `model`, `Gamma`, `phi_hat0`, `adaptation` and `gamma` and call :meth:`adapts` from
-    their `__post_init__`. The law's b (the vector its proof pairs with φ̃) moves the state by `geometry.rate(x, b)`."""
+    7.2.1): the book's Euclidean update with Γ (state x = φ̂), `adaptation = "natural"` with the scalar γ (state:
+    log-Cholesky coordinates of each link's pseudo-inertia), or `adaptation = "pullback"` with γ and the reference
+    `phi_ref` (default φ̂(0); state x = φ̂), :mod:`robotadapt.controllers.geometry`. A mixin of the laws' dataclasses,
+    which hold `model`, `Gamma`, `phi_hat0`, `adaptation`, `gamma` and `phi_ref` and call :meth:`adapts` from their
+    `__post_init__`. The law's b (the vector its proof pairs with φ̃) moves the state by `geometry.rate(x, b)`."""
 
     model: RobotModel
     Gamma: Array
     phi_hat0: Array
     adaptation: str
     gamma: Any
+    phi_ref: Any
+
     def adapts(self) -> None:
-        """Validate `adaptation`, `Gamma`, `gamma` and `phi_hat0` (physically consistent for the natural law)."""
+        """Validate `adaptation`, `Gamma`, `gamma`, `phi_hat0` (physically consistent for the natural law) and
+        `phi_ref` (the pullback metric's φ₀, physically consistent; None: φ̂(0), which then must be)."""
         Gamma, gamma = adaptation_gains(self.adaptation, self.Gamma, self.gamma, self.model.param_names)
         freeze(self, Gamma=Gamma, gamma=gamma)
         estimate(self)
+        freeze(self, phi_ref=pullback_reference(self.adaptation, self.phi_ref, self.phi_hat0, self.model.param_names))
         self.geometry.initial_state(self.phi_hat0)
 
     @derived
-    def geometry(self) -> Euclidean | Natural:
-        return geometry(self.adaptation, self.Gamma, self.gamma, self.model.param_names)
+    def geometry(self) -> Euclidean | Natural | Pullback:
+        return geometry(self.adaptation, self.Gamma, self.gamma, self.model.param_names,
+                        self.phi_hat0 if self.phi_ref is None else self.phi_ref)
 
     @property
     def state_names(self) -> tuple[str, ...]:

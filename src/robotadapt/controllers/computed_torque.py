@@ -51,6 +51,10 @@ class AdaptiveComputedTorque(EstimateState):
     adaptation, gamma : "euclidean" (Γ, the book's) or "natural" with the scalar γ > 0
         The natural law: the same b = Wᵀ M̂⁻¹ E1 moves each link's pseudo-inertia by dĴ/dt = Ĵ B Ĵ / γ, and V's
         parameter term is 2γ Σ D(Jᵢ‖Ĵᵢ) (docs/natural.md); no box.
+    phi_ref : (p,) array, optional
+        With `adaptation = "pullback"` and γ: the constant pullback metric dĴᵢ/dt = P₀ᵢ Bᵢ P₀ᵢ / γ on the same b,
+        P₀ᵢ = J(φ₀ᵢ) of this reference φ₀ (default φ̂(0); physically consistent), V's parameter term
+        γ Σ tr(P₀ᵢ⁻¹ J̃ᵢ P₀ᵢ⁻¹ J̃ᵢ); state φ̂, no box (its Γ is not diagonal).
     Q, P : (2n, 2n) array, optional
         The Lyapunov pair of (6.2.16); give at most one. From `Q`, P solves AᵀP + PA = −Q; a given `P` must make
         Q = −(AᵀP + PA) positive definite. With neither, scalar gains K_p = k_p I, K_v = k_v I take the book's
@@ -88,15 +92,18 @@ class AdaptiveComputedTorque(EstimateState):
     phi_max: Any = None
     adaptation: str = "euclidean"
     gamma: Any = None
+    phi_ref: Any = None
     book_pair: bool = field(init=False, default=False)  # (6.2.16)'s pair in the book's closed form (__post_init__)
 
     def __post_init__(self) -> None:
         n, p = self.model.n, self.model.p
         gains(self, ("Kp", "Kv"), n)
         self.adapts()
-        if self.adaptation == "natural" and (self.phi_min is not None or self.phi_max is not None):
-            raise ConfigError("controller.phi_min", "the natural law keeps φ̂ a real body itself; remove the box "
-                              "phi_min/phi_max, or use adaptation = \"euclidean\"")
+        if self.adaptation in ("natural", "pullback") and (self.phi_min is not None or self.phi_max is not None):
+            why = ("the natural law keeps φ̂ a real body itself" if self.adaptation == "natural" else
+                   "the pullback metric's Γ is not diagonal, and the box keeps dV/dt ≤ −xᵀQx for a diagonal Γ only")
+            raise ConfigError("controller.phi_min", f"{why}; remove the box phi_min/phi_max, or use adaptation = "
+                              "\"euclidean\"")
         if self.P is not None and self.Q is not None:
             raise ConfigError("controller.P", "give either P or Q (P is then solved from AᵀP + PA = −Q), not both")
         given = {k: getattr(self, k) for k in ("P", "Q", "phi_min", "phi_max") if getattr(self, k) is not None}

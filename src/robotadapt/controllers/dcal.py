@@ -51,7 +51,8 @@ class DCAL(EstimateState):
     Y_d depends only on the desired trajectory, so with `precompute = true` it is tabulated before the run on the
     simulation grid and read, not evaluated, on line (the point of §7.2). V is non-increasing when the gain conditions
     (7.2.22), (7.2.25), (7.2.26) hold. `k_v, k_p, k_a` are scalars, as in the book's analysis. `adaptation = "natural"`
-    with `gamma`: the natural law on b = Y_dᵀ r, its divergence in V (docs/natural.md).
+    with `gamma`: the natural law on b = Y_dᵀ r, its divergence in V (docs/natural.md); `adaptation = "pullback"` with
+    `gamma` and `phi_ref` (default φ̂(0)): the constant pullback metric on the same b, its quadratic form in V.
     """
 
     per_run: ClassVar[tuple[str, ...]] = ("phi_hat0",)  # varies per run in one vectorized batch
@@ -73,6 +74,7 @@ class DCAL(EstimateState):
     table: DesiredRegressorTable | None = field(default=None, metadata={"internal": True})
     adaptation: str = "euclidean"
     gamma: Any = None
+    phi_ref: Any = None
 
     def __post_init__(self) -> None:
         for name in ("Kv", "Kp", "Ka"):

@@ -24,6 +24,8 @@ class InertiaRelated(EstimateState):
     No joint acceleration and no inverse of M̂ are needed. State x = φ̂. Gains: a scalar (k·I), a list (diagonal) or a
     symmetric positive definite matrix. With `adaptation = "natural"` and the scalar `gamma`, the update is the natural
     adaptive law dĴᵢ/dt = Ĵᵢ Bᵢ Ĵᵢ / γ on b = Yᵀr and V's parameter term γ Σ D(Jᵢ‖Ĵᵢ) (docs/natural.md): the same dV/dt.
+    With `adaptation = "pullback"`, `gamma` and `phi_ref` (φ₀, default φ̂(0)): the constant pullback metric
+    dĴᵢ/dt = P₀ᵢ Bᵢ P₀ᵢ / γ, P₀ᵢ = J(φ₀ᵢ), with V's parameter term (γ/2) Σ tr(P₀ᵢ⁻¹ J̃ᵢ P₀ᵢ⁻¹ J̃ᵢ): the same dV/dt.
     """
 
     per_run: ClassVar[tuple[str, ...]] = ("Lam", "Kv", "Gamma", "phi_hat0")  # varies per run in one vectorized batch
@@ -42,6 +44,7 @@ class InertiaRelated(EstimateState):
     phi_hat0: Any = None
     adaptation: str = "euclidean"
     gamma: Any = None
+    phi_ref: Any = None
 
     def __post_init__(self) -> None:
         gains(self, ("Lam", "Kv"), self.model.n)
