@@ -55,3 +55,16 @@ def test_compare_help_lists_every_lineup_name(capsys: pytest.CaptureFixture) -> 
     listed = text.split("names of the lineup:")[1]
     for name in names:
         assert re.search(rf"\b{name}\b", listed.replace(",", " ")), name
+
+
+def test_no_lyapunov_growth_warning_for_a_law_that_holds_its_estimate() -> None:
+    from robotadapt.analysis.metrics import health_warnings, metrics
+    from robotadapt.studies.scenarios import load
+
+    held = metrics(load("example-6.3.1", ["simulation.t_final=0.5", 'controller.adaptation="none"']).run())
+    adapting = metrics(load("example-6.3.1", ["simulation.t_final=0.5"]).run())
+    assert "held" in held["lyapunov_not_applicable"] and "lyapunov_not_applicable" not in adapting
+    grown = {**adapting, "V_initial": 1.0, "V_final": 20.0}  # V grew twentyfold
+    assert any("Lyapunov growth" in w for w in health_warnings(grown))
+    grown["lyapunov_not_applicable"] = held["lyapunov_not_applicable"]
+    assert not any("Lyapunov growth" in w for w in health_warnings(grown))

@@ -118,7 +118,8 @@ def health_warnings(m: dict[str, Any]) -> list[str]:
         out.append(f"estimate drift: ‖φ̂‖ ends at {final:.4g} (from {start:.4g}) — σ-modification (law kind 'sigma') or a "
                    "projection box (controller.phi_min, phi_max) bounds it")
     v0, v1 = m.get("V_initial"), m.get("V_final")
-    if v0 is not None and v1 is not None and v1 > LYAPUNOV_GROWTH * max(v0, 1e-300):
+    if v0 is not None and v1 is not None and v1 > LYAPUNOV_GROWTH * max(v0, 1e-300) and \
+            "lyapunov_not_applicable" not in m:  # a law that holds φ̂: V is no Lyapunov function of its loop
         out.append(f"Lyapunov growth: V grew from {v0:.4g} to {v1:.4g} where the theory has V̇ ≤ 0 — its assumptions fail "
                    "here (a torque limit, a disturbance, measurement noise, unmodelled dynamics, sampling)")
     return out
@@ -186,6 +187,8 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
         out["V_initial"] = float(res.V[0])
         out["V_final"] = float(res.V[-1])
         out["lyapunov_max_rel_increase"] = lyapunov_increase(res.V)
+        if "lyapunov_caveat" in res.info:
+            out["lyapunov_not_applicable"] = res.info["lyapunov_caveat"]
     from .monitors import monitor_metrics
 
     out.update(monitor_metrics(res, res.monitors))

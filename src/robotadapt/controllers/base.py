@@ -57,6 +57,7 @@ class Law(Registered, Module, ABC):
     `lyapunov`                V of the law's proof, with the true φ                  None
     `phi_hat_at`              the φ̂ its torque uses when signals enter it (6.4.20)  `phi_hat(x)`
     `passivity_caveat`        why the gains may not imply the passivity claim        None
+    `lyapunov_caveat`         why `lyapunov` is no Lyapunov function of the loop     None
     `monitors`                the law's own monitor series (λ_min(P⁻¹))             none
     ========================  ====================================================  ===========================
 
@@ -203,6 +204,11 @@ class Law(Registered, Module, ABC):
         """Why the law's gains may not imply its passivity claim (the σ-modification's), or None."""
         return None
 
+    def lyapunov_caveat(self) -> str | None:
+        """Why `lyapunov` is no Lyapunov function of this loop (a law that holds φ̂), so that its growth warns of
+        nothing; None."""
+        return None
+
     def monitors(self, x: Array) -> dict[str, Array]:
         """The law's own monitor series at the logged states (the composite law's λ_min(P⁻¹), (6.6.27))."""
         return {}
@@ -298,6 +304,12 @@ class EstimateState(Law):
 
     def phi_hat(self, x: Array) -> Array:
         return self.geometry.estimate(x)
+
+    def lyapunov_caveat(self) -> str | None:
+        if self.adaptation != "none":
+            return None
+        return ("φ̂ is held at φ̂(0) (adaptation = \"none\"): V = ½ rᵀ M r has no parameter term, and Y φ̃ drives it, so "
+                "it is no Lyapunov function of this loop")
 
     def step(self, x: Array, dx: Array, h: Any) -> Array:
         """x after a control period h along dx/dt: the exponential map of the natural law (x + h·dx for Γ)."""

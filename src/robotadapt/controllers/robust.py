@@ -130,6 +130,9 @@ class SignRobust(Law):
     def passivity_caveat(self) -> str | None:
         return self.base.passivity_caveat()
 
+    def lyapunov_caveat(self) -> str | None:
+        return self.base.lyapunov_caveat()
+
     def monitors(self, x: Array) -> dict[str, Array]:
         return self.base.monitors(x)
 

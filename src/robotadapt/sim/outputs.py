@@ -127,6 +127,8 @@ def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | 
     caveat = ctrl.passivity_caveat()  # a law whose passivity claim its gains may not imply
     if signals["passivity"] is not None and caveat is not None:
         info = {**info, "passivity_caveat": caveat}
+    if signals.get("V") is not None and ctrl.lyapunov_caveat() is not None:  # V holds no proof here (a held φ̂)
+        info = {**info, "lyapunov_caveat": ctrl.lyapunov_caveat()}
     result = SimulationResult(t=t, **signals, phi=phi,  # type: ignore[arg-type]
                               param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
                               state_names=ctrl.state_names, status=status, wall_time=wall, info=info, running=folded)
