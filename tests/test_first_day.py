@@ -68,3 +68,32 @@ def test_no_lyapunov_growth_warning_for_a_law_that_holds_its_estimate() -> None:
     assert any("Lyapunov growth" in w for w in health_warnings(grown))
     grown["lyapunov_not_applicable"] = held["lyapunov_not_applicable"]
     assert not any("Lyapunov growth" in w for w in health_warnings(grown))
+
+
+def test_fixed_estimate_baselines_compensate_with_the_nominal_model() -> None:
+    import numpy as np
+
+    from robotadapt.studies.compare import lineup
+    from robotadapt.studies.scenarios import load
+
+    base = load("example-6.3.1")
+    entries, _ = lineup(base, ["pd_gravity", "computed_torque", "slotine_li"])
+    phi_hat0 = {e.name: np.asarray(e.scenario.data["controller"]["phi_hat0"]) for e in entries}
+    truth = np.asarray(base.setup.plant.phi)  # the book's arm has no nominal values: its own
+    np.testing.assert_array_equal(phi_hat0["pd_gravity"], truth)
+    np.testing.assert_array_equal(phi_hat0["computed_torque"], truth)
+    np.testing.assert_array_equal(phi_hat0["slotine_li"], [0.0, 0.0])  # the adaptive laws' common start
+    assert any("nominal" in n or "true φ" in n for e in entries if e.name == "pd_gravity" for n in [e.note])
+
+
+def test_a_baseline_on_a_urdf_arm_takes_the_urdfs_values() -> None:
+    import numpy as np
+
+    from robotadapt.studies.compare import lineup
+    from robotadapt.studies.scenarios import load
+
+    base = load("panda-slotine-li")
+    entries, _ = lineup(base, ["pd_gravity"])
+    np.testing.assert_allclose(entries[0].scenario.data["controller"]["phi_hat0"],
+                               base.setup.controller.model.default_phi)
+    assert "nominal" in entries[0].note

@@ -75,6 +75,9 @@ class Law(Registered, Module, ABC):
     needs_acceleration: ClassVar[bool] = False
     #: its entries in the comparison's lineup (none: it runs there only as a scenario's own law)
     lineup: ClassVar[tuple[Contender, ...]] = ()
+    #: a baseline with a fixed φ̂: the comparison gives it the nominal model (the model's published values, else the
+    #: true φ), not the adaptive laws' common φ̂(0)
+    nominal: ClassVar[bool] = False
     #: the comparison's gain family: the laws of one family take from the scenario's law the gains that play the same
     #: part ("6": r = ė + Λe, chapter 6; "7.2": r = ė + e, §7.2); None: shares none
     family: ClassVar[str | None] = None

@@ -67,6 +67,7 @@ class PDGravity(_Fixed):
     τ = K_p e + K_v ė + Ĝ(q) + F̂(q̇). For a set point (q̇_d = 0) this is the book's (6.3.5), stable by LaSalle."""
 
     kind = "pd_gravity"
+    nominal = True
     family = "6"
     lineup = (Contender("pd_gravity", "PD + gravity, fixed φ̂", "(6.3.5)", "K_p = K_v Λ, K_v of Example 6.3.1",
                         {"kind": "pd_gravity", "Kp": 25.0, "Kv": 10.0}, rank=40),)
@@ -84,6 +85,7 @@ class ComputedTorque(_Fixed):
     With φ̂ ≠ φ the error obeys ë + K_v ė + K_p e = M̂⁻¹ W φ̃ and stays bounded without decaying."""
 
     kind = "computed_torque"
+    nominal = True
     powers = MappingProxyType({})  # K_p, K_v act through M̂ (6.2.2): rates, whatever the arm's scale
     lineup = (Contender("computed_torque", "computed torque, fixed φ̂", "(6.2.2)", "Example 6.2.1's K_p, K_v",
                         {"kind": "computed_torque", "Kp": 4.0, "Kv": 4.0}, rank=20),)

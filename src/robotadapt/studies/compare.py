@@ -253,6 +253,13 @@ def _estimate(arm: _Arm, section: dict[str, Any]) -> list[str]:
     ConfigError when it cannot take it at all (module docstring)."""
     phi_hat0, p = arm.phi_hat0, arm.model.p
     notes = [] if arm.estimated else ["φ̂(0) = 0: the scenario's law has no estimate"]
+    law = registered("controller").get(section["kind"])
+    if law is not None and law.nominal:  # a baseline compensates with the nominal model
+        nominal = arm.model.default_phi
+        if nominal is not None:
+            phi_hat0, notes = np.asarray(nominal, dtype=float), ["φ̂ = the model's nominal values"]
+        elif arm.phi is not None:
+            phi_hat0, notes = arm.phi, ["φ̂ = the true φ (the model has no nominal values)"]
     if section["kind"] == "adaptive_computed_torque":
         lo, hi = (np.broadcast_to(np.asarray(section[k], dtype=float), (p,)) for k in ("phi_min", "phi_max"))
         if arm.phi is None:
