@@ -231,6 +231,12 @@ MEANINGS = {
     "rotor_inertia": ("add reflected rotor-inertia columns (planar: values per joint)", "kg m²", "false"),
     "viscous": ("add viscous friction columns", "N m s/rad", "false"),
     "coulomb": ("add Coulomb friction columns", "N m", "false"),
+    "smooth_coulomb": ("add smooth Coulomb friction columns f_s tanh(q̇/v_s) (planar: values per joint)", "N m",
+                       "false"),
+    "smooth_coulomb_velocity": ("v_s of the smooth Coulomb term tanh(q̇/v_s), one or per joint (m/s: prismatic)",
+                                "rad/s", "0.1"),
+    "robot.offset": ("add constant torque-offset columns τ_off, either sign (planar: values per joint)", "N m",
+                     "false"),
     "model": ("the model's engine: 'tree' (recursive, any n), 'sympy' (closed form), 'pinocchio' (reference)",
               "—", "'tree'"),
     "links": ("the DH table: a list of link tables, keys below", "—", "[[robot.links]] …"),
@@ -330,6 +336,8 @@ MEANINGS = {
     "q_limits": ("joint limits [lower, upper]", "rad", "[-3.14, 3.14]"),
     "links.a": ("DH link length", "m", "0.5"), "links.rotor_inertia": ("rotor inertia", "kg m²", "0.0"),
     "links.viscous": ("viscous friction", "N m s/rad", "0.0"), "links.coulomb": ("Coulomb friction", "N m", "0.0"),
+    "links.smooth_coulomb": ("smooth Coulomb friction, the coefficient of tanh(q̇/v_s)", "N m", "0.0"),
+    "links.offset": ("constant torque offset, either sign", "N m", "0.0"),
 }
 
 

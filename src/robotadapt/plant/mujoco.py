@@ -20,6 +20,8 @@ between the engines is the dynamics), per-joint `damping` (N·m·s/rad), `armatu
 `joint_limits` (a URDF's), and `actuation`: torques through "motor" actuators (gear 1, unlimited) or written
 into `qfrc_applied`. Where the truth model has the matching columns (rotor inertia Ia_i, viscous fv_i or b, Coulomb
 fc_i) MuJoCo's option and φ's entry are one number: an option left out takes φ's value, and they may not differ.
+A constant torque offset off_i (τ = … + off_i) is a bias force, −off_i added to `qfrc_applied` at every step; MuJoCo
+has no smooth (tanh) Coulomb friction, so a truth with a nonzero fs_i is refused (`plant.phi`).
 
 The plant is advanced by MuJoCo's own step (:meth:`MujocoPlant.advance`) at the control ticks of the sampled-data loop
 (:mod:`robotadapt.sim.sampled`) with the torque held: a host-side engine, numpy backend only. Its `MjData` is a
@@ -148,6 +150,7 @@ class MujocoPlant(Plant):
     frictionloss: Any = None
     joint_limits: bool = False
     _options: dict[str, np.ndarray] = field(init=False, repr=False, metadata={"internal": True})
+    _offset: Any = field(init=False, repr=False, metadata={"internal": True})
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -182,7 +185,25 @@ class MujocoPlant(Plant):
                                   f"{from_phi[index >= 0].tolist()}: MuJoCo's option is the truth; drop one of them")
             options[name] = value
         object.__setattr__(self, "_options", options)
+        object.__setattr__(self, "_offset", self._friction_terms(phi))
         self.engine  # noqa: B018 -- compile now: a model MuJoCo refuses is a scenario error, not a run's
+
+    def _friction_terms(self, phi: np.ndarray) -> np.ndarray:
+        """The truth's constant torque offsets off_i per joint (zero without the column); a ConfigError for a nonzero
+        smooth Coulomb coefficient fs_i, which MuJoCo cannot represent."""
+        offset, smooth = np.zeros(self.model.n), {}
+        for k, name in enumerate(self.model.param_names):
+            match = re.fullmatch(r"(off|fs)(\d+)", name)
+            if match and 1 <= int(match[2]) <= self.model.n:
+                if match[1] == "off":
+                    offset[int(match[2]) - 1] = phi[k]
+                elif phi[k] != 0.0:
+                    smooth[name] = float(phi[k])
+        if smooth:
+            raise ConfigError("plant.phi", f"MuJoCo has no smooth (tanh) Coulomb friction, and the truth has "
+                              f"{', '.join(f'{k} = {v:g}' for k, v in smooth.items())}: set them to 0 or use "
+                              "plant.engine = 'robotadapt'")
+        return offset
 
     # -- the MuJoCo model ---------------------------------------------------------------------------------------------
 
@@ -352,7 +373,7 @@ class MujocoPlant(Plant):
     def advance(self, t: float, s: Array, u: Array, steps: int, dt: float, dynamics: Any = None) -> np.ndarray:
         """The state s = [q, q̇] at time t after `steps` MuJoCo steps of `dt` (s) with the torque u held (MuJoCo's
         dynamics, not `dynamics`); a disturbance T_d(t, q, q̇) is subtracted, evaluated at the start of each MuJoCo step
-        and held over it."""
+        and held over it, and the truth's torque offsets always."""
         mj = load_mujoco()
         model, data, qadr, vadr = self.engine
         n = self.model.n
@@ -361,14 +382,14 @@ class MujocoPlant(Plant):
         motor = self.actuation == "motor"
         if motor:
             data.ctrl[:] = u
+        applied = (0.0 if motor else u) - self._offset
         if self.disturbance is None:
-            if not motor:
-                data.qfrc_applied[vadr] = u
+            data.qfrc_applied[vadr] = applied
             mj.mj_step(model, data, nstep=steps)
         else:
             for i in range(steps):
                 disturbance = self.disturbance(t + i * dt, data.qpos[qadr], data.qvel[vadr])
-                data.qfrc_applied[vadr] = (0.0 if motor else u) - disturbance
+                data.qfrc_applied[vadr] = applied - disturbance
                 mj.mj_step(model, data)
         return np.concatenate([data.qpos[qadr], data.qvel[vadr]])
 
@@ -389,6 +410,8 @@ class MujocoPlant(Plant):
         engine = {"engine": "mujoco", "version": load_mujoco().__version__, "source": self.urdf or "MjSpec",
                   "integrator": self.integrator, "actuation": self.actuation, "joint_limits": self.joint_limits,
                   **options}
+        if np.any(self._offset != 0.0):
+            engine["offset"] = self._offset.tolist()
         return {**super().describe(), "mujoco": engine}
 
 

@@ -81,7 +81,8 @@ def joint_types(model: Any) -> str | None:
 #: parameter name (without the joint number) → unit for a revolute joint, for a prismatic one
 _UNITS = {"m": ("kg", "kg"), "mx": ("kg·m", "kg·m"), "my": ("kg·m", "kg·m"), "mz": ("kg·m", "kg·m"),
           **{f"I{a}": ("kg·m²", "kg·m²") for a in ("xx", "xy", "yy", "xz", "yz", "zz")},
-          "Ia": ("kg·m²", "kg"), "fv": ("N·m·s/rad", "N·s/m"), "fc": ("N·m", "N")}
+          "Ia": ("kg·m²", "kg"), "fv": ("N·m·s/rad", "N·s/m"), "fc": ("N·m", "N"), "fs": ("N·m", "N"),
+          "off": ("N·m", "N")}
 #: the one-link arm's parameters (its `m` is the joint's inertia)
 _ONE_LINK = {"m": "kg·m²", "b": "N·m·s/rad", "k": "N·m/rad"}
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..validation import ConfigError
 from .base import RobotModel
+from .dh import SMOOTH_VELOCITY
 from .kinematic_tree import KinematicTree
 
 URDF_MODELS = ("tree", "pinocchio")
@@ -51,23 +52,30 @@ def _pinocchio(model: str, rotor_inertia: bool) -> Any:
 
 
 def urdf_arm(path: str | Path, locked_joints: Any = (), viscous: bool = False, coulomb: bool = False,
-             rotor_inertia: bool = False, gravity: Any = None, model: str = "tree") -> RobotModel:
-    """An arm from a URDF file: joints in `locked_joints` held at zero; friction and rotor-inertia columns on request."""
+             rotor_inertia: bool = False, gravity: Any = None, model: str = "tree", *, smooth_coulomb: bool = False,
+             smooth_coulomb_velocity: Any = SMOOTH_VELOCITY, offset: bool = False) -> RobotModel:
+    """An arm from a URDF file: joints in `locked_joints` held at zero; friction (viscous, Coulomb, smooth Coulomb
+    tanh(q̇/v_s) at v_s = `smooth_coulomb_velocity`, a constant offset) and rotor-inertia columns on request."""
     reference = _pinocchio(model, rotor_inertia)
     if reference is not None:
-        return reference.from_urdf(path, locked_joints, viscous, coulomb, gravity)
+        return reference.from_urdf(path, locked_joints, viscous, coulomb, gravity, smooth_coulomb, offset,
+                                   smooth_coulomb_velocity)
     with _scenario_names():
-        return KinematicTree.from_urdf(path, tuple(locked_joints), rotor_inertia, viscous, coulomb, gravity)
+        return KinematicTree.from_urdf(path, tuple(locked_joints), rotor_inertia, viscous, coulomb, gravity,
+                                       smooth_coulomb, offset, smooth_coulomb_velocity)
 
 
 def example_arm(name: str, locked_joints: Any = (), viscous: bool = False, coulomb: bool = False,
-                rotor_inertia: bool = False, gravity: Any = None, model: str = "tree") -> RobotModel:
+                rotor_inertia: bool = False, gravity: Any = None, model: str = "tree", *, smooth_coulomb: bool = False,
+                smooth_coulomb_velocity: Any = SMOOTH_VELOCITY, offset: bool = False) -> RobotModel:
     """An arm of example-robot-data by name (`robotadapt.robots.pinocchio.EXAMPLES`; grippers locked)."""
     reference = _pinocchio(model, rotor_inertia)
     if reference is not None:
-        return reference.example(name, locked_joints, viscous, coulomb, gravity)
+        return reference.example(name, locked_joints, viscous, coulomb, gravity, smooth_coulomb, offset,
+                                 smooth_coulomb_velocity)
     with _scenario_names():
-        arm = KinematicTree.example(name, tuple(locked_joints), rotor_inertia, viscous, coulomb)
+        arm = KinematicTree.example(name, tuple(locked_joints), rotor_inertia, viscous, coulomb, smooth_coulomb,
+                                    offset, smooth_coulomb_velocity)
     return arm if gravity is None else replace(arm, g=np.asarray(gravity, dtype=float))
 
 
@@ -75,27 +83,35 @@ def _tree_or_sympy(arm: Any, model: str) -> RobotModel:
     return arm if _check(model, DH_MODELS) == "sympy" else KinematicTree.from_symbolic(arm)
 
 
-def dh_arm(links: Any, convention: str = "standard", g: Any = (0.0, 0.0, -9.81), model: str = "tree") -> RobotModel:
-    """An arm from a DH table (the link tables of :func:`robotadapt.robots.symbolic.from_dh_table`)."""
+def dh_arm(links: Any, convention: str = "standard", g: Any = (0.0, 0.0, -9.81), model: str = "tree", *,
+           smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> RobotModel:
+    """An arm from a DH table (the link tables of :func:`robotadapt.robots.symbolic.from_dh_table`; a link's
+    `smooth_coulomb` or `offset` adds that friction group, v_s = `smooth_coulomb_velocity`)."""
     _check(model, DH_MODELS)
     if model == "tree":
-        return KinematicTree.from_dh(links, convention, g)
+        return KinematicTree.from_dh(links, convention, g, smooth_coulomb_velocity)
     from .symbolic import from_dh_table
 
-    return from_dh_table(links, convention, g)
+    return from_dh_table(links, convention, g, smooth_coulomb_velocity)
 
 
-def puma560_arm(rotor_inertia: bool = False, viscous: bool = False, coulomb: bool = False,
-                model: str = "tree") -> RobotModel:
+def puma560_arm(rotor_inertia: bool = False, viscous: bool = False, coulomb: bool = False, model: str = "tree", *,
+                smooth_coulomb: bool = False, smooth_coulomb_velocity: Any = SMOOTH_VELOCITY,
+                offset: bool = False) -> RobotModel:
     """The PUMA 560 of :func:`robotadapt.robots.symbolic.puma560` (published parameters, joint limits)."""
     from .symbolic import puma560
 
-    return _tree_or_sympy(puma560(rotor_inertia, viscous, coulomb), model)
+    arm = puma560(rotor_inertia, viscous, coulomb, smooth_coulomb, offset, smooth_coulomb_velocity)
+    return _tree_or_sympy(arm, model)
 
 
 def planar(n_links: int, lengths: Any = 1.0, masses: Any = 1.0, rods: bool = False, g: float = 9.8,
-           rotor_inertia: Any = None, viscous: Any = None, coulomb: Any = None, model: str = "tree") -> RobotModel:
+           rotor_inertia: Any = None, viscous: Any = None, coulomb: Any = None, model: str = "tree", *,
+           smooth_coulomb: Any = None, smooth_coulomb_velocity: Any = SMOOTH_VELOCITY,
+           offset: Any = None) -> RobotModel:
     """The n-link planar arm of :func:`robotadapt.robots.symbolic.planar_arm`."""
     from .symbolic import planar_arm
 
-    return _tree_or_sympy(planar_arm(n_links, lengths, masses, rods, g, rotor_inertia, viscous, coulomb), model)
+    arm = planar_arm(n_links, lengths, masses, rods, g, rotor_inertia, viscous, coulomb, smooth_coulomb, offset,
+                     smooth_coulomb_velocity)
+    return _tree_or_sympy(arm, model)

@@ -8,9 +8,10 @@ pseudo-inertia (Wensing, Kim & Slotine, RA-L 2017)::
 
 and the link is a real body (mass, centre of mass and inertia with the triangle inequalities) iff J ≻ 0. The other
 parameters of the project's models are physical scalars that a body keeps non-negative: the book's point masses (m1,
-m2, m), rotor inertias (Ia), viscous and Coulomb coefficients (fv, fc, b). The "smallest eigenvalue" of such a part is
-its value. φ is consistent when every part's smallest eigenvalue is ≥ 0: on the closure of the set, so that the book's
-φ̂(0) = 0 (no mass yet) counts, and a part below zero has left it.
+m2, m), rotor inertias (Ia), viscous, Coulomb and smooth-Coulomb coefficients (fv, fc, fs, b). The "smallest eigenvalue"
+of such a part is its value. φ is consistent when every part's smallest eigenvalue is ≥ 0: on the closure of the set,
+so that the book's φ̂(0) = 0 (no mass yet) counts, and a part below zero has left it. A constant torque offset (off)
+has either sign: it is no part (:func:`unformed`), so no bound holds it.
 """
 
 from __future__ import annotations
@@ -25,8 +26,9 @@ from .dh import LINK_PARAMS
 
 Array = Any
 _LINK = re.compile(rf"^({'|'.join(LINK_PARAMS)})(\d+)$")
-# the models' scalar physical parameters: point masses, rotor inertias, viscous and Coulomb friction, joint stiffness
-_SCALAR = re.compile(r"^(m|Ia|fv|fc|b|k)\d*$")
+# the models' scalar physical parameters, ≥ 0: point masses, rotor inertias, viscous, Coulomb and smooth-Coulomb
+# friction, joint stiffness (not a torque offset "off1", which has either sign)
+_SCALAR = re.compile(r"^(m|Ia|fv|fc|fs|b|k)\d*$")
 
 
 def _basis() -> Array:
@@ -63,8 +65,9 @@ class Part(NamedTuple):
 
 def parts(param_names: tuple[str, ...] | list[str]) -> list[Part]:
     """φ's parts by its parameter names: every complete set of `LINK_PARAMS` with one link number is a link, a mass,
-    rotor inertia, friction coefficient or stiffness (`m2`, `Ia3`, `fv1`, `fc1`, `b`, `k`) a scalar. Other parameters
-    (base-parameter combinations) have no physical form: :func:`unformed` names them."""
+    rotor inertia, friction coefficient or stiffness (`m2`, `Ia3`, `fv1`, `fc1`, `fs1`, `b`, `k`) a scalar. Other
+    parameters (base-parameter combinations, a torque offset `off1`, which has either sign) have no physical form:
+    :func:`unformed` names them."""
     links: dict[str, dict[str, int]] = {}
     for k, name in enumerate(param_names):
         match = _LINK.match(name)

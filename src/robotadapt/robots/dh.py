@@ -48,8 +48,14 @@ Array = Any
 #: the order of a link's standard parameters (Pinocchio's `Inertia.toDynamicParameters` order)
 LINK_PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 #: a chain's optional per-joint column groups, in this order after the 10n inertial ones, and their names' prefixes
-EXTRAS = ("rotor_inertia", "viscous", "coulomb")
-EXTRA_NAMES = {"rotor_inertia": "Ia", "viscous": "fv", "coulomb": "fc"}
+EXTRAS = ("rotor_inertia", "viscous", "coulomb", "smooth_coulomb", "offset")
+EXTRA_NAMES = {"rotor_inertia": "Ia", "viscous": "fv", "coulomb": "fc", "smooth_coulomb": "fs", "offset": "off"}
+#: the groups of F(q̇), each a diagonal block of Y whose entries depend on q̇ alone (:meth:`SerialChain.friction`)
+FRICTION = ("viscous", "coulomb", "smooth_coulomb", "offset")
+#: the groups whose values may be negative (a constant torque offset); the others are ≥ 0
+SIGNED = ("offset",)
+#: v_s of the smooth Coulomb column tanh(q̇/v_s) unless a model says otherwise: rad/s (m/s on a prismatic joint)
+SMOOTH_VELOCITY = 0.1
 #: a link's keys in a DH table (`[[robot.links]]`)
 LINK_KEYS = ("joint", "a", "alpha", "d", "theta", "m", "com", "inertia", *EXTRAS, "q_limits")
 
@@ -57,12 +63,31 @@ LINK_KEYS = ("joint", "a", "alpha", "d", "theta", "m", "com", "inertia", *EXTRAS
 class SerialChain:
     """The joint count and parameter layout shared by the serial-chain models (the symbolic DH arm, the kinematic
     tree): 10 standard parameters per link (`LINK_PARAMS`), then n columns per optional group of `EXTRAS` the model
-    has (a field of that name, None when absent). A mixin: the models are dataclasses with these fields."""
+    has (a field of that name, None when absent). A mixin: the models are dataclasses with these fields.
+
+    The friction groups (`FRICTION`) make F(q̇) = Σ_groups diag(column) φ_group, linear in φ, per joint i:
+
+        viscous          fv_i q̇_i
+        coulomb          fc_i sgn(q̇_i)
+        smooth_coulomb   fs_i tanh(q̇_i / v_s,i)     v_s = `smooth_coulomb_velocity` (rad/s, m/s), a fixed setting
+        offset           off_i                       a constant torque (force), either sign
+
+    The smooth Coulomb term is Gaz et al.'s friction sigmoid (IEEE RA-L 4(4), 2019, the Panda's identified model
+    φ₁/(1 + e^(−φ₂(q̇ + φ₃))) − φ₁/(1 + e^(−φ₂φ₃))) with the shift φ₃ = 0 and the slope φ₂ fixed: then it is
+    φ₁ (σ(φ₂ q̇) − ½) = (φ₁/2) tanh(φ₂ q̇/2), i.e. fs = φ₁/2 and v_s = 2/φ₂, linear in its one coefficient. tanh rather
+    than the uncentred sigmoid because tanh is odd: zero at rest, and no constant part, which would be collinear with
+    the offset column; as v_s → 0 it tends to sgn, so fs is a Coulomb level in N·m. The shift φ₃ (not linear) makes
+    the sigmoid's two levels unequal; away from zero speed that is fs tanh + off with off = −(φ₁/2) tanh(φ₂φ₃/2).
+    The default v_s = `SMOOTH_VELOCITY` = 0.1 rad/s is below Gaz et al.'s Panda values 2/φ₂ = 0.12–0.39 rad/s; a
+    much smaller v_s adds a slope fs/v_s at rest that makes the plant stiff for a fixed-step integrator."""
 
     joints: str  # one letter per joint, "R" or "P"
     rotor_inertia: Array | None  # the optional groups' values (`EXTRAS`), None when absent
     viscous: Array | None
     coulomb: Array | None
+    smooth_coulomb: Array | None
+    offset: Array | None
+    smooth_coulomb_velocity: Array  # v_s per joint, > 0
 
     @property
     def n(self) -> int:
@@ -83,25 +108,42 @@ class SerialChain:
         k = 10 * self.n + self.n * self.extras.index(name)
         return phi[..., k : k + self.n]
 
-    def friction(self, dq: Array, phi: Array) -> Array:
-        """F(q̇) = f_v ∘ q̇ + f_c ∘ sgn(q̇) (the groups present), shape `(..., n)`."""
-        dq, phi = (x if hasattr(x, "shape") else np.asarray(x, dtype=float) for x in (dq, phi))
-        xp = array_namespace(dq, phi)
-        out = 0.0 * dq + 0.0 * phi[..., :1]
+    def friction_columns(self, dq: Array) -> dict[str, Array]:
+        """The diagonal of each friction group's block of Y at q̇ `(..., n)`, for the groups present: q̇ (viscous),
+        sgn q̇ (Coulomb), tanh(q̇/v_s) (smooth Coulomb), 1 (offset)."""
+        xp = array_namespace(dq)
+        out: dict[str, Array] = {}
         if self.viscous is not None:
-            out = out + self._extra(phi, "viscous") * dq
+            out["viscous"] = dq
         if self.coulomb is not None:
-            out = out + self._extra(phi, "coulomb") * xp.sign(dq)
+            out["coulomb"] = xp.sign(dq)
+        if self.smooth_coulomb is not None:
+            out["smooth_coulomb"] = xp.tanh(dq / self.smooth_coulomb_velocity)
+        if self.offset is not None:
+            out["offset"] = 1.0 + 0.0 * dq
+        return out
+
+    def friction(self, dq: Array, phi: Array) -> Array:
+        """F(q̇) = f_v ∘ q̇ + f_c ∘ sgn(q̇) + f_s ∘ tanh(q̇/v_s) + τ_off (the groups present), shape `(..., n)`."""
+        dq, phi = (x if hasattr(x, "shape") else np.asarray(x, dtype=float) for x in (dq, phi))
+        out = 0.0 * dq + 0.0 * phi[..., :1]
+        for name, column in self.friction_columns(dq).items():
+            out = out + self._extra(phi, name) * column
         return out
 
     def _check_extras(self) -> None:
-        """Validate the optional groups given (n values each, none negative) and store them as arrays."""
+        """Validate the optional groups given (n values each, none negative but the offset's) and v_s (> 0), and store
+        them as arrays."""
         for name in EXTRAS:
             if getattr(self, name) is not None:
                 values = as_vector(getattr(self, name), self.n, f"robot.{name}")
-                if np.any(values < 0):
+                if name not in SIGNED and np.any(values < 0):
                     raise ConfigError(f"robot.{name}", f"must be zero or positive, got {values}")
                 object.__setattr__(self, name, values)
+        object.__setattr__(self, "smooth_coulomb_velocity", as_vector(
+            self.smooth_coulomb_velocity, self.n, "robot.smooth_coulomb_velocity", positive=True))
+
+
 #: the generated functions: name → (argument names, whether the last argument is φ)
 FUNCTIONS = {"regressor": ("q", "dq", "v", "a"), "momentum": ("q", "dq"), "remainder": ("q", "dq"),
              "mass": ("q", "phi"), "coriolis": ("q", "dq", "phi"), "gravity": ("q", "phi")}

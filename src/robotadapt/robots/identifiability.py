@@ -17,6 +17,15 @@ finds the same rank but picks representatives by residual norm, which scrambles 
 kept |R_ii| are ≥ 0.5 and the dropped ≤ 1e-9, so the order costs no robustness.) K has an identity on the kept columns
 and β on the others. M, V_m, G and F depend on φ only through K φ, so a controller that adapts φ_b loses nothing
 (:class:`BaseParameterModel`).
+
+Friction columns (robotadapt.robots.dh.SerialChain) are per joint and depend on q̇ alone: each is independent of the
+rigid-body columns, which all involve q or q̈. The offset column (𝟙 on its joint) is constant: gravity's columns of a
+revolute joint have no constant part (G_i = ∂U/∂q_i of a U periodic in q_i averages to zero over q_i), and the masses
+that give a prismatic joint a constant gravity torque also give it inertia (m q̈), so it stays independent on data
+that accelerate the joints — but on data held at rest (q̈ = q̇ = 0) the offset of a joint whose gravity torque is
+constant cannot be told from the masses it carries. The Coulomb and smooth Coulomb columns differ only where |q̇| is
+a few v_s or less (tanh(q̇/v_s) = sgn q̇ beyond): independent, but nearly collinear unless the data move slowly often,
+so identify one of the two unless the log has many slow reversals.
 """
 
 from __future__ import annotations
@@ -42,7 +51,8 @@ class BaseParameters(Module):
     ("Izz1 + Iyy2 + 0.0841·m3", coefficients in SI units). `margin` is (smallest kept, largest dropped) |R_ii|: the
     decision is safe when the two are orders of magnitude apart around `tol`. `residual` is max |Y − Y_b K| / max |Y|
     on the sampled states (round-off when the decision is right). With `friction=False` the friction parameters (the
-    columns of Y(q, q̇, 0, 0) − Y(q, 0, 0, 0)) are left out: their columns of K are zero.
+    columns of F(q̇) = `model.friction`, or of Y(q, q̇, 0, 0) − Y(q, 0, 0, 0), which misses a constant offset column)
+    are left out: their columns of K are zero.
     """
 
     model: RobotModel
@@ -97,7 +107,9 @@ def base_parameters(model: RobotModel, friction: bool = True, rng: np.random.Gen
     if not friction:
         zero = 0.0 * dq
         Yf = (model.regressor(q, dq, zero, zero) - model.regressor(q, zero, zero, zero)).reshape(-1, p)
-        Y = np.where(np.max(np.abs(Yf), axis=0) > tol * np.max(np.abs(Y)), 0.0, Y)
+        F = np.asarray(model.friction(dq[:, None, :], np.eye(p)))  # F(q̇; e_k), (samples, p, n): an offset's too
+        acts = np.maximum(np.max(np.abs(Yf), axis=0), np.max(np.abs(F), axis=(0, 2)))
+        Y = np.where(acts > tol * np.max(np.abs(Y)), 0.0, Y)
     scale = np.linalg.norm(Y, axis=0)
     idle = scale <= tol * scale.max()  # parameters that never act (round-off alone must not be scaled up)
     Y, scale = np.where(idle, 0.0, Y), np.where(idle, 1.0, scale)

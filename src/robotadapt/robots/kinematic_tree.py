@@ -9,7 +9,8 @@ placement of the link frame in the joint frame (`link_rotation`, `link_translati
 (Pinocchio's joint frame), Tz(d) Tx(a) Rx(α) for a standard DH row (:func:`robotadapt.robots.dh.joint_placements`).
 φ holds 10 standard parameters per link, [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] about the link
 frame's origin in its axes (Pinocchio's order, as :mod:`.pinocchio` and :mod:`.symbolic`), then optional columns per
-joint: rotor inertia I_a q̈ ("Ia1", …), viscous f_v q̇ ("fv1", …), Coulomb f_c sgn q̇ ("fc1", …).
+joint: rotor inertia I_a q̈ ("Ia1", …), viscous f_v q̇ ("fv1", …), Coulomb f_c sgn q̇ ("fc1", …), smooth Coulomb
+f_s tanh(q̇/v_s) ("fs1", …) and a constant offset τ_off ("off1", …) (:class:`robotadapt.robots.dh.SerialChain`).
 
 Route: the recursive Newton–Euler algorithm (Luh, Walker & Paul 1980; Featherstone, *Rigid Body Dynamics Algorithms*,
 2008, ch. 5), bilinear in two velocities. Every velocity product of the standard pass (V ×ₘ S q̇, ω × (ω × h), ω × I ω)
@@ -56,7 +57,7 @@ import numpy as np
 from ..arrays import array_namespace
 from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
 from .base import Array, RobotModel
-from .dh import EXTRAS, LINK_KEYS, Geometry, SerialChain, joint_placements
+from .dh import EXTRAS, LINK_KEYS, SIGNED, SMOOTH_VELOCITY, Geometry, SerialChain, joint_placements
 
 _MATMUL_ABOVE = 64  # leading size (states × links) above which small products use matmul (see `_many`)
 _PAIRS = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # I_xx, I_xy, I_yy, I_xz, I_yz, I_zz
@@ -189,9 +190,11 @@ class KinematicTree(SerialChain, RobotModel):
     Per joint: `parents` (index of the parent joint, −1 for the base; parents come first), `rotation` (n, 3, 3) and
     `translation` (n, 3) the joint frame in the parent link's frame at q = 0, `axis` (n, 3) unit, in the joint frame,
     `link_rotation`, `link_translation` the link frame in the joint frame; `g` the gravity vector (m/s², base axes);
-    `link_params` (n, 10) the standard parameters `default_phi` starts with; `rotor_inertia`, `viscous`, `coulomb`
-    (n,) or None: the column groups present and their default values; `joint_names`, `q_limits` (n, 2), `dq_limits` and
-    `tau_limits` (n,) (a URDF's `<limit velocity effort>`), `name` informative (exciting trajectories respect them).
+    `link_params` (n, 10) the standard parameters `default_phi` starts with; `rotor_inertia`, `viscous`, `coulomb`,
+    `smooth_coulomb`, `offset` (n,) or None: the column groups present and their default values, and
+    `smooth_coulomb_velocity` v_s (rad/s or m/s; one, or one per joint) of the smooth Coulomb column; `joint_names`,
+    `q_limits` (n, 2), `dq_limits` and `tau_limits` (n,) (a URDF's `<limit velocity effort>`), `name` informative
+    (exciting trajectories respect them).
     Build one with :meth:`from_urdf`, :meth:`example`, :meth:`from_pinocchio`, :meth:`from_dh` or :meth:`from_symbolic`;
     `dataclasses.replace` makes variants.
     """
@@ -213,6 +216,9 @@ class KinematicTree(SerialChain, RobotModel):
     dq_limits: Any = None
     tau_limits: Any = None
     name: str = "chain"
+    smooth_coulomb: Any = None
+    offset: Any = None
+    smooth_coulomb_velocity: Any = SMOOTH_VELOCITY
     _const: dict[str, Array] = field(init=False, repr=False)
     _chain: bool = field(init=False, repr=False)
 
@@ -270,15 +276,18 @@ class KinematicTree(SerialChain, RobotModel):
 
     @classmethod
     def from_pinocchio(cls, model: Any, rotor_inertia: bool = False, viscous: bool = False, coulomb: bool = False,
-                       name: str = "pinocchio") -> KinematicTree:
+                       name: str = "pinocchio", smooth_coulomb: bool = False, offset: bool = False,
+                       smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> KinematicTree:
         """The chain (or tree) of a `pinocchio.Model` of revolute, continuous and prismatic joints (any axis); φ about
-        each joint frame (Pinocchio's); `default_phi` from its inertias, then `armature`, `damping`, `friction`."""
-        return cls._from_model(model, rotor_inertia, viscous, coulomb, name, "robot.model")
+        each joint frame (Pinocchio's); `default_phi` from its inertias, then `armature`, `damping`, `friction`, and
+        zero for the smooth Coulomb and offset groups (a URDF has no such numbers)."""
+        return cls._from_model(model, {"rotor_inertia": rotor_inertia, "viscous": viscous, "coulomb": coulomb,
+                                       "smooth_coulomb": smooth_coulomb, "offset": offset}, smooth_coulomb_velocity,
+                               name, "robot.model")
 
     @classmethod
-    def _from_model(cls, model: Any, rotor_inertia: bool, viscous: bool, coulomb: bool, name: str,
+    def _from_model(cls, model: Any, flags: dict[str, Any], smooth_coulomb_velocity: Any, name: str,
                     field_: str) -> KinematicTree:
-        flags = {"rotor_inertia": rotor_inertia, "viscous": viscous, "coulomb": coulomb}
         for key, flag in flags.items():
             check_switch(flag, f"robot.{key}")
         kinds, axes, bad = [], [], []
@@ -304,40 +313,49 @@ class KinematicTree(SerialChain, RobotModel):
                   ("tau_limits", np.array([model.effortLimit[model.idx_vs[j]] for j in joints])))}
         placements = [model.jointPlacements[j] for j in joints]
         n = len(kinds)
-        extras = {"rotor_inertia": model.armature, "viscous": model.damping, "coulomb": model.friction}
+        extras = {"rotor_inertia": model.armature, "viscous": model.damping, "coulomb": model.friction,
+                  "smooth_coulomb": np.zeros(n), "offset": np.zeros(n)}
         return cls("".join(kinds), tuple(int(model.parents[j]) - 1 for j in joints),
                    np.array([X.rotation for X in placements]), np.array([X.translation for X in placements]),
                    np.array(axes), np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3)), np.array(model.gravity.linear),
                    np.array([model.inertias[j].toDynamicParameters() for j in joints]),
                    **{k: np.array(v, dtype=float) if flags[k] else None for k, v in extras.items()},
-                   joint_names=tuple(model.names[1:]), q_limits=q_limits, name=name, **rates)
+                   joint_names=tuple(model.names[1:]), q_limits=q_limits, name=name,
+                   smooth_coulomb_velocity=smooth_coulomb_velocity, **rates)
 
     @classmethod
     def from_urdf(cls, path: str | PathLike[str], locked: Sequence[str] = (), rotor_inertia: bool = False,
-                  viscous: bool = False, coulomb: bool = False, gravity: Any = None) -> KinematicTree:
+                  viscous: bool = False, coulomb: bool = False, gravity: Any = None, smooth_coulomb: bool = False,
+                  offset: bool = False, smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> KinematicTree:
         """The arm of the URDF file `path` read by Pinocchio, with the joints named in `locked` fixed at their neutral
-        position (grippers), optional column groups (defaults from the URDF's `<dynamics damping friction>`), and
-        `gravity` (m/s², base axes; default (0, 0, −9.81))."""
+        position (grippers), optional column groups (defaults from the URDF's `<dynamics damping friction>`, zero for
+        the smooth Coulomb and offset groups), and `gravity` (m/s², base axes; default (0, 0, −9.81))."""
         from .pinocchio import urdf_model
 
         model = urdf_model(path, locked, gravity, "robot.urdf", "robot.locked")
-        return cls._from_model(model, rotor_inertia, viscous, coulomb, Path(path).stem, "robot.urdf")
+        flags = {"rotor_inertia": rotor_inertia, "viscous": viscous, "coulomb": coulomb,
+                 "smooth_coulomb": smooth_coulomb, "offset": offset}
+        return cls._from_model(model, flags, smooth_coulomb_velocity, Path(path).stem, "robot.urdf")
 
     @classmethod
     def example(cls, name: str, locked: Sequence[str] = (), rotor_inertia: bool = False, viscous: bool = False,
-                coulomb: bool = False) -> KinematicTree:
+                coulomb: bool = False, smooth_coulomb: bool = False, offset: bool = False,
+                smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> KinematicTree:
         """An arm of `example-robot-data` (offline, `robotadapt.robots.pinocchio.EXAMPLES`), grippers locked."""
         from .pinocchio import example_urdf
 
         path, gripper = example_urdf(name)
-        return replace(cls.from_urdf(path, gripper + tuple(locked), rotor_inertia, viscous, coulomb), name=name)
+        arm = cls.from_urdf(path, gripper + tuple(locked), rotor_inertia, viscous, coulomb, None, smooth_coulomb,
+                            offset, smooth_coulomb_velocity)
+        return replace(arm, name=name)
 
     @classmethod
-    def from_dh(cls, links: Sequence[dict[str, Any]], convention: str = "standard",
-                g: Any = (0.0, 0.0, -9.81)) -> KinematicTree:
+    def from_dh(cls, links: Sequence[dict[str, Any]], convention: str = "standard", g: Any = (0.0, 0.0, -9.81),
+                smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> KinematicTree:
         """An arm from DH rows, the link tables of :func:`robotadapt.robots.symbolic.from_dh_table` (`joint`, `a`,
         `alpha`, `d`, `theta`, `m`, `com`, `inertia` about the centre of mass, optional `rotor_inertia`, `viscous`,
-        `coulomb`, `q_limits`); φ in each link's DH frame, as :class:`robotadapt.robots.symbolic.SymbolicArm`.
+        `coulomb`, `smooth_coulomb`, `offset`, `q_limits`), v_s of the smooth Coulomb columns; φ in each link's DH
+        frame, as :class:`robotadapt.robots.symbolic.SymbolicArm`.
         Standard: frame i = frame i−1 · Rz(θ) Tz(d) Tx(a) Rx(α); modified (Craig): Rx(α) Tx(a) Rz(θ) Tz(d)."""
         if isinstance(links, dict | str) or not isinstance(links, Sequence) or not links:
             raise ConfigError("robot.links", "expected a list of link tables ([[robot.links]] in TOML), one per joint")
@@ -365,7 +383,7 @@ class KinematicTree(SerialChain, RobotModel):
             check_spd(inertia, f"{where}.inertia", semidefinite=True)
             I_o = inertia + m * (c @ c * np.eye(3) - np.outer(c, c))  # about the frame origin (parallel axes)
             rows["params"].append([m, *(m * c), *(I_o[j, k] for j, k in _PAIRS)])
-        extras = {key: [as_scalar(link.get(key, 0.0), f"robot.links[{i}].{key}", nonnegative=True)
+        extras = {key: [as_scalar(link.get(key, 0.0), f"robot.links[{i}].{key}", nonnegative=key not in SIGNED)
                         for i, link in enumerate(links)] for key in EXTRAS if any(key in link for link in links)}
         limits = [link.get("q_limits") for link in links]
         if any(x is not None for x in limits) and not all(x is not None for x in limits):
@@ -379,7 +397,9 @@ class KinematicTree(SerialChain, RobotModel):
                    np.array([T[:3, 3] for T in pre]), np.tile([0.0, 0.0, 1.0], (n, 1)), np.array([T[:3, :3] for T in post]),
                    np.array([T[:3, 3] for T in post]), gravity, np.array(rows["params"]),
                    extras.get("rotor_inertia"), extras.get("viscous"), extras.get("coulomb"),
-                   q_limits=None if limits[0] is None else as_array(limits, "robot.q_limits"), name="dh")
+                   q_limits=None if limits[0] is None else as_array(limits, "robot.q_limits"), name="dh",
+                   smooth_coulomb=extras.get("smooth_coulomb"), offset=extras.get("offset"),
+                   smooth_coulomb_velocity=smooth_coulomb_velocity)
 
     @classmethod
     def from_symbolic(cls, arm: Any) -> KinematicTree:
@@ -392,7 +412,7 @@ class KinematicTree(SerialChain, RobotModel):
             if arm.q_limits is not None:
                 link["q_limits"] = arm.q_limits[i]
             links.append(link)
-        return cls.from_dh(links, arm.convention, arm.g)
+        return cls.from_dh(links, arm.convention, arm.g, arm.smooth_coulomb_velocity)
 
     # -- structure ----------------------------------------------------------------------------------------------------
 
@@ -543,7 +563,7 @@ class KinematicTree(SerialChain, RobotModel):
         return self._subtree(xp, mass[..., None]), self._subtree(xp, Rh + mass[..., None] * p0), composite
 
     def _with_extras(self, xp: Any, Y: Array, batch: tuple[int, ...], values: dict[str, Array]) -> Array:
-        """Y with the extra column groups: diag(values[group]) (sgn for Coulomb), zero for a group not in `values`."""
+        """Y with the extra column groups: diag(values[group]), zero for a group not in `values`."""
         Y = xp.broadcast_to(Y, batch + (self.n, 10 * self.n))
         if not self.extras:
             return Y
@@ -551,7 +571,7 @@ class KinematicTree(SerialChain, RobotModel):
         blocks = [Y]
         for e in self.extras:
             x = values.get(e)
-            block = 0.0 * eye if x is None else (xp.sign(x) if e == "coulomb" else x)[..., :, None] * eye
+            block = 0.0 * eye if x is None else x[..., :, None] * eye
             blocks.append(xp.broadcast_to(block, batch + (self.n, self.n)))
         return xp.concat(blocks, axis=-1)
 
@@ -567,7 +587,7 @@ class KinematicTree(SerialChain, RobotModel):
         xp, batch, (q, dq, v, a) = self._inputs(q, dq, v, a)
         kin = self._kinematics(xp, q)
         Y = self._project(xp, kin, self._link_regressor(xp, self._pass(xp, kin, dq, v, a, True)))
-        return self._with_extras(xp, Y, batch, {"rotor_inertia": a, "viscous": dq, "coulomb": dq})
+        return self._with_extras(xp, Y, batch, {"rotor_inertia": a, **self.friction_columns(dq)})
 
     def regressor_products(self, q: Array, dq: Array, v: Array, a: Array, phi: Array, r: Array) -> tuple[Array, Array]:
         """(Y φ, Yᵀ r) for Y = Y(q, q̇, v, a) without forming Y, from one bilinear pass: Y φ = Σ S̃_jᵀ X_i* (A_i φ_i) is
@@ -586,7 +606,7 @@ class KinematicTree(SerialChain, RobotModel):
         local = _mtv(kin.R0[..., None, :, :], xp.stack([w, lin + _cross(xp, w, kin.p0)], axis=-2))  # (..., n, 2, 3)
         Ytr = (self._link_regressor(xp, m) * xp.reshape(local, local.shape[:-2] + (6, 1))).sum(axis=-2)  # (..., n, 10)
         Ytr = xp.reshape(Ytr, Ytr.shape[:-2] + (10 * self.n,))
-        extras = {"rotor_inertia": a, "viscous": dq, "coulomb": xp.sign(dq)}
+        extras = {"rotor_inertia": a, **self.friction_columns(dq)}
         Ytr = xp.concat([xp.broadcast_to(Ytr, batch + Ytr.shape[-1:])]
                         + [xp.broadcast_to(extras[e] * r, batch + (self.n,)) for e in self.extras], axis=-1)
         return xp.broadcast_to(Yphi, batch + (self.n,)), Ytr
@@ -608,7 +628,7 @@ class KinematicTree(SerialChain, RobotModel):
         velocity = xp.concat([m.w, m.lin], axis=-1)[..., :1, :, :]  # slot 1 does not depend on k
         coriolis = (velocity[..., None] * self._link_regressor(xp, m)).sum(axis=-2)  # (..., k, i, 10)
         Y = Y - xp.reshape(coriolis, coriolis.shape[:-2] + (10 * self.n,))
-        return self._with_extras(xp, Y, batch, {"viscous": dq, "coulomb": dq})
+        return self._with_extras(xp, Y, batch, self.friction_columns(dq))
 
     def mass_matrix(self, q: Array, phi: Array) -> Array:
         """M(q) (P1), shape `(..., n, n)`, by composite rigid bodies on φ: M_jk = S̃_jᵀ Ĩᶜ_k S̃_k for j moving k."""

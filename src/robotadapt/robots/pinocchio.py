@@ -2,7 +2,10 @@
 
 φ holds 10 standard parameters per link, Pinocchio's order [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz]
 (c the centre of mass and I the inertia about the joint frame's origin, both in that frame; links after a locked joint
-are merged into their parent), then optional friction per joint: F(q̇) = f_v ∘ q̇ (`viscous`) + f_c ∘ sgn(q̇) (`coulomb`).
+are merged into their parent), then optional friction per joint: F(q̇) = f_v ∘ q̇ (`viscous`) + f_c ∘ sgn(q̇) (`coulomb`)
++ f_s ∘ tanh(q̇/v_s) (`smooth_coulomb`, v_s = `smooth_coulomb_velocity`) + τ_off (`offset`), in this order, named
+fv, fc, fs, off (:class:`robotadapt.robots.dh.SerialChain` has the same groups). Pinocchio's algorithms hold the
+rigid-body part only; the friction columns are added here.
 
 Every term is computed from the kinematics and φ, never from the inertias stored in the URDF, so each is exactly linear
 in φ for any φ, including the zero or non-physical estimates a controller holds (Pinocchio's own `Inertia` cannot hold a
@@ -37,6 +40,7 @@ import numpy as np
 
 from ..validation import ConfigError, as_vector, check_switch
 from .base import Array, RobotModel
+from .dh import SMOOTH_VELOCITY
 
 _INERTIAL = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 
@@ -124,6 +128,7 @@ def _unit_inertias() -> Array:
 
 
 _T = _unit_inertias().reshape(10, 36)
+_FRICTION = {"viscous": "fv", "coulomb": "fc", "smooth_coulomb": "fs", "offset": "off"}  # group → name prefix, in order
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,10 +144,13 @@ class PinocchioArm(RobotModel):
     viscous: bool = False
     coulomb: bool = False
     name: str = "urdf"
+    smooth_coulomb: bool = False
+    offset: bool = False
+    smooth_coulomb_velocity: Any = SMOOTH_VELOCITY
 
     def __post_init__(self) -> None:
-        check_switch(self.viscous, "robot.viscous")
-        check_switch(self.coulomb, "robot.coulomb")
+        for key in _FRICTION:
+            check_switch(getattr(self, key), f"robot.{key}")
         model = self.pin_model
         if model.nv == 0:
             raise ConfigError("robot.path", "the model has no moving joint")
@@ -150,25 +158,31 @@ class PinocchioArm(RobotModel):
                if model.joints[j].nv != 1]
         if bad:
             raise ConfigError("robot.locked_joints", f"only 1-DOF joints are supported; lock {', '.join(bad)}")
+        object.__setattr__(self, "smooth_coulomb_velocity", as_vector(
+            self.smooth_coulomb_velocity, model.nv, "robot.smooth_coulomb_velocity", positive=True))
 
     # construction ----------------------------------------------------------------------------------------------------
     @classmethod
     def from_urdf(cls, path: str | Path, locked_joints: Any = (), viscous: bool = False, coulomb: bool = False,
-                  gravity: Any = None) -> PinocchioArm:
+                  gravity: Any = None, smooth_coulomb: bool = False, offset: bool = False,
+                  smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> PinocchioArm:
         """The arm of the URDF file `path`, with `locked_joints` (names) fixed at their neutral position, optional
         friction columns, and `gravity` (m/s², 3 numbers in the base frame; default Pinocchio's (0, 0, −9.81))."""
         model = urdf_model(path, locked_joints, gravity, "robot.path", "robot.locked_joints")
-        return cls(model, viscous, coulomb, Path(path).stem)
+        return cls(model, viscous, coulomb, Path(path).stem, smooth_coulomb, offset, smooth_coulomb_velocity)
 
     @classmethod
     def example(cls, name: str, locked_joints: Any = (), viscous: bool = False, coulomb: bool = False,
-                gravity: Any = None) -> PinocchioArm:
+                gravity: Any = None, smooth_coulomb: bool = False, offset: bool = False,
+                smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> PinocchioArm:
         """An arm shipped by `example-robot-data` (offline), see `EXAMPLES`; its gripper joints are locked, and
         `locked_joints` lists further joints to lock."""
         path, gripper = example_urdf(name)
         if not isinstance(locked_joints, list | tuple):
             raise ConfigError("robot.locked_joints", f"expected a list of joint names, got {locked_joints!r}")
-        return replace(cls.from_urdf(path, gripper + tuple(locked_joints), viscous, coulomb, gravity), name=name)
+        arm = cls.from_urdf(path, gripper + tuple(locked_joints), viscous, coulomb, gravity, smooth_coulomb, offset,
+                            smooth_coulomb_velocity)
+        return replace(arm, name=name)
 
     # the RobotModel contract -----------------------------------------------------------------------------------------
     @property
@@ -179,14 +193,17 @@ class PinocchioArm(RobotModel):
     def param_names(self) -> tuple[str, ...]:
         n = range(1, self.n + 1)
         names = [f"{s}{i}" for i in n for s in _INERTIAL]
-        return tuple(names + [f"fv{i}" for i in n if self.viscous] + [f"fc{i}" for i in n if self.coulomb])
+        return tuple(names + [f"{prefix}{i}" for key, prefix in _FRICTION.items() if getattr(self, key) for i in n])
 
     @property
     def default_phi(self) -> Array:
-        """The URDF's own parameters: its inertias, then its `<dynamics damping friction>` values when enabled."""
+        """The URDF's own parameters: its inertias, then its `<dynamics damping friction>` values when enabled (zero
+        smooth Coulomb and offset: a URDF has no such numbers)."""
         model = self.pin_model
         parts = [model.inertias[j].toDynamicParameters() for j in range(1, model.njoints)]
-        parts += [model.damping] * self.viscous + [model.friction] * self.coulomb
+        values = {"viscous": model.damping, "coulomb": model.friction, "smooth_coulomb": np.zeros(self.n),
+                  "offset": np.zeros(self.n)}
+        parts += [np.asarray(values[key], dtype=float) for key in _FRICTION if getattr(self, key)]
         return np.concatenate(parts)
 
     @property
@@ -221,7 +238,7 @@ class PinocchioArm(RobotModel):
         return (Y @ self._rigid(phi)[..., None])[..., 0]
 
     def friction(self, dq: Array, phi: Array) -> Array:
-        """F(q̇) = f_v ∘ q̇ + f_c ∘ sgn(q̇) (whichever columns the model has)."""
+        """F(q̇) = f_v ∘ q̇ + f_c ∘ sgn(q̇) + f_s ∘ tanh(q̇/v_s) + τ_off (whichever columns the model has)."""
         Yf = self._friction_columns(np.asarray(dq, dtype=float))
         return (Yf @ np.asarray(phi, dtype=float)[..., 10 * self.n :, None])[..., 0]
 
@@ -246,7 +263,7 @@ class PinocchioArm(RobotModel):
     def momentum_regressor(self, q: Array, dq: Array) -> Array:
         """Y_h(q, q̇), `Y_h φ = M q̇` (6.6.3): Y_p(q, 0, q̇) − Y_p(q, 0, 0), two calls; zero friction columns."""
         Y = self._each(self._momentum, (self.n, 10 * self.n), q, dq)
-        return self._with_friction(Y, 0.0 * np.asarray(dq, dtype=float))
+        return np.concatenate([Y, np.zeros(Y.shape[:-1] + (self.p - 10 * self.n,))], axis=-1)
 
     # per-state Pinocchio calls -----------------------------------------------------------------------------------------
     @cached_property
@@ -340,13 +357,16 @@ class PinocchioArm(RobotModel):
         return (rigid.reshape(rigid.shape[:-1] + (self.n, 10)) @ _T).reshape(rigid.shape[:-1] + (self.n, 6, 6))
 
     def _friction_columns(self, dq: Array) -> Array:
-        """The friction block of Y, shape `(..., n, n·(viscous + coulomb))`."""
+        """The friction block of Y, shape `(..., n, n·groups)`: diag(q̇), diag(sgn q̇), diag(tanh(q̇/v_s)), 𝟙 for the
+        groups present."""
         eye = np.eye(self.n)
-        blocks = [dq[..., None] * eye] * self.viscous + [np.sign(dq)[..., None] * eye] * self.coulomb
+        columns = {"viscous": dq, "coulomb": np.sign(dq), "smooth_coulomb": np.tanh(dq / self.smooth_coulomb_velocity),
+                   "offset": np.ones_like(dq)}
+        blocks = [columns[key][..., None] * eye for key in _FRICTION if getattr(self, key)]
         return np.concatenate(blocks, axis=-1) if blocks else np.zeros(dq.shape + (0,))
 
     def _with_friction(self, Y: Array, dq: Array) -> Array:
-        if not (self.viscous or self.coulomb):
+        if self.p == 10 * self.n:
             return Y
         Yf = self._friction_columns(np.asarray(dq, dtype=float))
         return np.concatenate([Y, np.broadcast_to(Yf, Y.shape[:-1] + Yf.shape[-1:])], axis=-1)

@@ -6,7 +6,9 @@
 φ holds the standard inertial parameters, 10 per link ([m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz]
 with the inertia about the link-frame origin, link-frame axes: names "m1", "mx1", ..., "Izz1"), then optionally one
 reflected rotor inertia per joint ("Ia1", ...: I_a q̈ on the joint, no gyroscopic coupling), one viscous ("fv1", ...:
-f_v q̇) and one Coulomb coefficient ("fc1", ...: f_c sgn q̇). The rigid-body part is derived and compiled by
+f_v q̇), one Coulomb ("fc1", ...: f_c sgn q̇) and one smooth Coulomb coefficient ("fs1", ...: f_s tanh(q̇/v_s)), and a
+constant torque offset ("off1", ...) (:class:`robotadapt.robots.dh.SerialChain`). The rigid-body part is derived and
+compiled by
 :mod:`robotadapt.robots.dh` (cached on disk, needs the `[symbolic]` extra on a cache miss only).
 
 Models: :func:`from_dh_table` (any table, TOML-friendly), :func:`planar_arm` (an n-link planar family), :func:`puma560`.
@@ -24,7 +26,7 @@ import numpy as np
 from ..arrays import array_namespace
 from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
 from .base import Array, RobotModel
-from .dh import EXTRAS, LINK_KEYS, Compiled, Geometry, SerialChain, compiled, joint_placements
+from .dh import EXTRAS, LINK_KEYS, SIGNED, SMOOTH_VELOCITY, Compiled, Geometry, SerialChain, compiled, joint_placements
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,8 +38,10 @@ class SymbolicArm(SerialChain, RobotModel):
     `g` the gravity vector (m/s², base frame). Inertia per link, in its DH frame: `mass` (kg), `com` (n, 3) centre of
     mass (m), `inertia` (n, 3, 3) about the centre of mass (kg m²). Optional per joint, each adding n columns to the
     regressor when given: `rotor_inertia` (kg m², reflected to the joint: J_m G²), `viscous` (N m s/rad), `coulomb`
-    (N m). `q_limits` (n, 2), informative (trajectories should stay inside). `default_phi` is the vector these values
-    give. The model is compiled at construction (from the disk cache when the geometry was derived before).
+    (N m), `smooth_coulomb` (N m, the coefficient of tanh(q̇/v_s), v_s = `smooth_coulomb_velocity` in rad/s), `offset`
+    (N m, either sign). `q_limits` (n, 2), informative (trajectories should stay inside). `default_phi` is the vector
+    these values give. The model is compiled at construction (from the disk cache when the geometry was derived
+    before).
     """
 
     joints: str
@@ -54,6 +58,9 @@ class SymbolicArm(SerialChain, RobotModel):
     viscous: Any = None
     coulomb: Any = None
     q_limits: Any = None
+    smooth_coulomb: Any = None
+    offset: Any = None
+    smooth_coulomb_velocity: Any = SMOOTH_VELOCITY
     _code: Compiled = field(init=False, repr=False, metadata={"internal": True})
 
     def __post_init__(self) -> None:
@@ -141,14 +148,13 @@ class SymbolicArm(SerialChain, RobotModel):
         return phi[..., : 10 * self.n]
 
     def _columns(self, base: Array, diagonals: dict[str, Array]) -> Array:
-        """The rigid-body columns followed by one diagonal block per extra group: diag(given vector), sgn of it for the
-        Coulomb group, zero where a group plays no part."""
+        """The rigid-body columns followed by one diagonal block per extra group: diag(given vector), zero where a group
+        plays no part."""
         xp = array_namespace(base)
         eye, zero = xp.eye(self.n), 0.0 * base[..., : self.n]
         blocks = []
         for e in self.extras:
             x = diagonals.get(e)
-            x = xp.sign(x) if x is not None and e == "coulomb" else x
             blocks.append(zero if x is None else x[..., :, None] * eye + zero)
         return xp.concatenate([base] + blocks, axis=-1)
 
@@ -157,7 +163,7 @@ class SymbolicArm(SerialChain, RobotModel):
     def regressor(self, q: Array, dq: Array, v: Array, a: Array) -> Array:
         """Y(q, q̇, v, a), shape `(..., n, p)`: Y φ = M a + V_m(q, q̇) v + G + F(q̇) (P3)."""
         Y = self._eval("regressor", (self.n, 10 * self.n), q, dq, v, a)
-        return Y if not self.extras else self._columns(Y, {"rotor_inertia": a, "viscous": dq, "coulomb": dq})
+        return Y if not self.extras else self._columns(Y, {"rotor_inertia": a, **self.friction_columns(dq)})
 
     def momentum_regressor(self, q: Array, dq: Array) -> Array:
         """Y_h(q, q̇) with Y_h φ = M(q) q̇ (6.6.3)."""
@@ -167,7 +173,7 @@ class SymbolicArm(SerialChain, RobotModel):
     def remainder_regressor(self, q: Array, dq: Array) -> Array:
         """Y_g(q, q̇) with Y_g φ = −V_mᵀ q̇ + G + F (6.6.4), exact."""
         Y = self._eval("remainder", (self.n, 10 * self.n), q, dq)
-        return Y if not self.extras else self._columns(Y, {"viscous": dq, "coulomb": dq})
+        return Y if not self.extras else self._columns(Y, self.friction_columns(dq))
 
     def mass_matrix(self, q: Array, phi: Array) -> Array:
         M = self._eval("mass", (self.n, self.n), q, self._inertial(phi))
@@ -229,14 +235,16 @@ def _inertia(value: Any, field_: str) -> Array:
     return arr
 
 
-def from_dh_table(links: Sequence[dict[str, Any]], convention: str = "standard",
-                  g: Any = (0.0, 0.0, -9.81)) -> SymbolicArm:
+def from_dh_table(links: Sequence[dict[str, Any]], convention: str = "standard", g: Any = (0.0, 0.0, -9.81),
+                  smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> SymbolicArm:
     """An arm from a list of links (a TOML array of tables), one per joint, each with the keys
 
     `joint` ("R" or "P", default "R"), `a`, `alpha`, `d`, `theta` (DH numbers, default 0), `m` (kg), `com` (centre of
     mass in the link's DH frame, m, default 0), `inertia` (about the centre of mass, 3 principal moments or a 3×3 tensor,
-    kg m², default 0), and optionally `rotor_inertia`, `viscous`, `coulomb` (a column group is added when any link gives
-    its key; links that do not give it get 0) and `q_limits` ([lower, upper], on every link or none).
+    kg m², default 0), and optionally `rotor_inertia`, `viscous`, `coulomb`, `smooth_coulomb`, `offset` (a column group
+    is added when any link gives its key; links that do not give it get 0; only an offset may be negative) and
+    `q_limits` ([lower, upper], on every link or none). `smooth_coulomb_velocity` is v_s of tanh(q̇/v_s) (rad/s or m/s,
+    one or one per joint).
     """
     if isinstance(links, dict) or not isinstance(links, Sequence) or isinstance(links, str) or not links:
         raise ConfigError("robot.links", "expected a list of link tables ([[robot.links]] in TOML), one per joint")
@@ -259,7 +267,7 @@ def from_dh_table(links: Sequence[dict[str, Any]], convention: str = "standard",
     optional: dict[str, Any] = {}
     for key in EXTRAS:
         if any(key in link for link in links):
-            optional[key] = [as_scalar(link.get(key, 0.0), f"robot.links[{i}].{key}", nonnegative=True)
+            optional[key] = [as_scalar(link.get(key, 0.0), f"robot.links[{i}].{key}", nonnegative=key not in SIGNED)
                              for i, link in enumerate(links)]
     given = sum("q_limits" in link for link in links)
     if given:
@@ -268,17 +276,21 @@ def from_dh_table(links: Sequence[dict[str, Any]], convention: str = "standard",
         optional["q_limits"] = [as_vector(link["q_limits"], 2, f"robot.links[{i}].q_limits", broadcast=False)
                                 for i, link in enumerate(links)]
     return SymbolicArm("".join(columns["joint"]), columns["a"], columns["alpha"], columns["d"], columns["theta"],
-                       columns["m"], np.array(columns["com"]), np.array(columns["inertia"]), convention, g, **optional)
+                       columns["m"], np.array(columns["com"]), np.array(columns["inertia"]), convention, g, **optional,
+                       smooth_coulomb_velocity=smooth_coulomb_velocity)
 
 
 def planar_arm(n_links: int, lengths: Any = 1.0, masses: Any = 1.0, rods: bool = False, g: float = 9.8,
-               rotor_inertia: Any = None, viscous: Any = None, coulomb: Any = None) -> SymbolicArm:
+               rotor_inertia: Any = None, viscous: Any = None, coulomb: Any = None, smooth_coulomb: Any = None,
+               offset: Any = None, smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> SymbolicArm:
     """An n-link planar arm of revolute joints about parallel vertical-plane axes, angles from the horizontal, gravity
     along −y (the book's two-link arm is `planar_arm(2)` with φ = [m1, 0, …, m2, 0, …]).
 
     `rods=False`: point masses at the distal link ends (massless links, as in the book's Example 3.2.2); `rods=True`:
     uniform slender rods (centre of mass at mid-length, I = m l²/12 about it). Standard DH: a_i = l_i, α = d = θ = 0, so
-    only m, m c_x, m c_y and I_zz of each link enter the dynamics; the other regressor columns are zero.
+    only m, m c_x, m c_y and I_zz of each link enter the dynamics; the other regressor columns are zero. The optional
+    groups (`rotor_inertia`, `viscous`, `coulomb`, `smooth_coulomb`, `offset`: one value or one per joint) add their
+    columns when given, v_s = `smooth_coulomb_velocity`.
     """
     if isinstance(n_links, bool) or not isinstance(n_links, int | np.integer) or not 1 <= n_links <= 64:
         raise ConfigError("robot.n_links", f"expected a whole number of links from 1 to 64, got {n_links!r}")
@@ -296,7 +308,8 @@ def planar_arm(n_links: int, lengths: Any = 1.0, masses: Any = 1.0, rods: bool =
         inertia[:, 1, 1] = inertia[:, 2, 2] = mass * length**2 / 12
     zeros = np.zeros(n)
     return SymbolicArm("R" * n, length, zeros, zeros, zeros, mass, com, inertia, "standard", (0.0, -g, 0.0),
-                       rotor_inertia, viscous, coulomb)
+                       rotor_inertia, viscous, coulomb, smooth_coulomb=smooth_coulomb, offset=offset,
+                       smooth_coulomb_velocity=smooth_coulomb_velocity)
 
 
 # The PUMA 560 in standard DH, SI units, as in P. Corke's Robotics Toolbox (`Puma560`), whose values come from
@@ -324,19 +337,24 @@ _PUMA = (
 )
 
 
-def puma560(rotor_inertia: bool = False, viscous: bool = False, coulomb: bool = False) -> SymbolicArm:
+def puma560(rotor_inertia: bool = False, viscous: bool = False, coulomb: bool = False, smooth_coulomb: bool = False,
+            offset: bool = False, smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> SymbolicArm:
     """The Unimation PUMA 560 (standard DH; sources in the comment above `_PUMA`), gravity 9.81 m/s² along −z.
 
     φ: the 60 standard parameters of the six links, then with `rotor_inertia` the reflected motor inertias J_m G²
     (which dominate the arm's inertia at joints 1–3), with `viscous` the link-side viscous friction B G², with `coulomb`
-    the link-side Coulomb friction |G| (T_c+ − T_c−)/2 (the mean of the two directions). `default_phi` holds the
-    published values; `q_limits` the joint ranges.
+    the link-side Coulomb friction |G| (T_c+ − T_c−)/2 (the mean of the two directions), with `offset` the rest of the
+    asymmetric Coulomb friction, |G| (T_c+ + T_c−)/2 (T_c± for q̇ ≷ 0, as f_c takes them: f_c sgn q̇ + τ_off is |G| T_c±
+    at every nonzero speed, and τ_off also at rest), with `smooth_coulomb` zero columns (no published value; v_s =
+    `smooth_coulomb_velocity`). `default_phi` holds the published values; `q_limits` the joint ranges.
     """
-    for name, value in (("rotor_inertia", rotor_inertia), ("viscous", viscous), ("coulomb", coulomb)):
+    for name, value in (("rotor_inertia", rotor_inertia), ("viscous", viscous), ("coulomb", coulomb),
+                        ("smooth_coulomb", smooth_coulomb), ("offset", offset)):
         check_switch(value, f"robot.{name}")
     columns = [np.array(column, dtype=float) for column in zip(*_PUMA, strict=True)]
     a, alpha, d, m, com, moments, Jm, G, B, Tc, limits = columns
     return SymbolicArm("RRRRRR", a, alpha, d, np.zeros(6), m, com, np.array([np.diag(x) for x in moments]),
                        "standard", (0.0, 0.0, -9.81), Jm * G**2 if rotor_inertia else None,
                        B * G**2 if viscous else None, np.abs(G) * (Tc[:, 0] - Tc[:, 1]) / 2 if coulomb else None,
-                       np.radians(limits))
+                       np.radians(limits), np.zeros(6) if smooth_coulomb else None,
+                       np.abs(G) * (Tc[:, 0] + Tc[:, 1]) / 2 if offset else None, smooth_coulomb_velocity)
