@@ -260,6 +260,11 @@ MEANINGS = {
               "per parameter", "20.0 or {scale = 10}"),
     "phi_hat0": ("φ̂(0), the initial estimate: a list of p, a number for all (0: zeros), or {scale = s}: s × plant.phi",
                  "per parameter", "0 or {scale = 0.7}"),
+    "adaptation": ("the update law's geometry: \"euclidean\" (Γ), \"natural\" (γ, pseudo-inertias), \"pullback\" (γ, "
+                   "P₀ from phi_ref) or \"none\" (φ̂ held)", "—", "\"natural\""),
+    "gamma": ("γ, the natural or pullback law's gain (larger: slower adaptation)", "—", "0.01"),
+    "phi_ref": ("φ₀, the pullback metric's reference (adaptation = \"pullback\"): a list of p, physically consistent "
+                "(default: phi_hat0)", "per parameter", "—"),
     "a": ("the torque filter's pole a of a/(s + a) (composite)", "1/s", "10.0"),
     "P0": ("P(0), the least-squares gain", "per parameter", "10.0"), "forgetting": ("forgetting factor λ", "1/s", "0.0"),
     "k0": ("bound on the least-squares gain's norm (none: unbounded)", "—", "100.0"),
@@ -275,6 +280,11 @@ MEANINGS = {
     "precompute": ("tabulate Y_d(t) over one period first", "—", "false"),
     "kL": ("k_L, the learning gain", "—", "1.0"),
     "period": ("period of the trajectory (default: the trajectory's)", "s", "6.28"),
+    "trajectory.fourier.period": ("the base period T_f of the Fourier series, ω_f = 2π/T_f (Swevers et al. 1997)", "s",
+                                  "10.0"),
+    "trajectory.fourier.a": ("a_il, the sine coefficients of q̇: a table [joint][harmonic] of n rows of K, or a list of "
+                             "K for every joint", "rad/s", "[0.3, 0.1]"),
+    "trajectory.fourier.b": ("b_il, the cosine coefficients of q̇ (as `a`)", "rad/s", "[0.0, 0.2]"),
     "u_min": ("lower saturation of the learned torque", "N m", "-50"), "u_max": ("upper saturation", "N m", "50"),
     "rounded_delay": ("accept a step that does not divide the period: delay N = round(T/dt) steps (what compare sets)",
                       "—", "true"),
@@ -350,14 +360,18 @@ def _cell(value: object) -> str:
     if value is None:
         return "none"
     shown = plain(value)
-    return f"`{toml_value(shown)}`".replace("|", "\\|") if shown is not None else "—"
+    text = " ".join(toml_value(shown).split()).replace("[ ", "[").replace(", ]", "]")  # a table row is one line
+    return f"`{text}`".replace("|", "\\|") if shown is not None else "—"
 
 
 def _key_rows(where: str, defaults: dict, special: dict | None = None) -> list[str]:
     rows = ["| key | meaning | unit | default | typical |", "|---|---|---|---|---|"]
     for key, default in defaults.items():
-        meaning, unit, typical = MEANINGS.get(f"{where}.{key}", MEANINGS.get(key, ("—", "—", "—")))
+        registry = where.split(".")[0]  # a kind's own meaning, then its registry's, then the key's everywhere
+        meaning, unit, typical = MEANINGS.get(f"{where}.{key}", MEANINGS.get(f"{registry}.{key}",
+                                                                               MEANINGS.get(key, ("—", "—", "—"))))
         shown = (special or {}).get(key, _cell(default))
+        meaning = meaning.replace("|", "\\|")  # |φ_k| in a cell: the bars escaped, not the row's
         rows.append(f"| `{key}` | {meaning} | {unit} | {shown} | `{typical}` |".replace("``—`", "—").replace("`—`", "—"))
     return rows
 
@@ -391,7 +405,7 @@ def keys_page() -> str:
     for registry in REGISTRIES:
         out += [f"## [{where[registry]}]", ""]
         for kind in kinds(registry):
-            out += [f"### kind = \"{kind}\"", "", *_key_rows(registry, keys(registry, kind), zeros), ""]
+            out += [f"### kind = \"{kind}\"", "", *_key_rows(f"{registry}.{kind}", keys(registry, kind), zeros), ""]
         if registry == "robot":
             defaults = {k: REQUIRED if k == "m" else 0.0 for k in LINK_KEYS}
             defaults.update(joint="R", q_limits=None)

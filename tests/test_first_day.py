@@ -97,3 +97,22 @@ def test_a_baseline_on_a_urdf_arm_takes_the_urdfs_values() -> None:
     np.testing.assert_allclose(entries[0].scenario.data["controller"]["phi_hat0"],
                                base.setup.controller.model.default_phi)
     assert "nominal" in entries[0].note
+
+
+def test_every_row_of_the_keys_page_is_one_row_of_five_cells() -> None:
+    import sys
+
+    sys.path.insert(0, str(ROOT / "docs"))
+    try:
+        import generate
+    finally:
+        sys.path.remove(str(ROOT / "docs"))
+    page = generate.keys_page()
+    rows = [line for line in page.splitlines() if line.startswith("|")]
+    assert rows
+    for line in rows:  # a multi-line default (dh's g) once broke its table into rows "0.0,", "-9.81,"
+        assert len(re.findall(r"(?<!\\)\|", line)) == 6, line
+    fourier = page[page.index('### kind = "fourier"'):]
+    fourier = fourier[: fourier.index("\n### ")]
+    assert "composite" not in fourier and "| `b` | —" not in fourier
+    assert "default: the trajectory's" not in fourier
