@@ -116,3 +116,23 @@ def test_every_row_of_the_keys_page_is_one_row_of_five_cells() -> None:
     fourier = fourier[: fourier.index("\n### ")]
     assert "composite" not in fourier and "| `b` | —" not in fourier
     assert "default: the trajectory's" not in fourier
+
+
+def test_the_planar_and_dh_arms_on_the_kinematic_tree_need_no_sympy(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "class Block:\n"
+            "    def find_spec(self, name, path, target=None):\n"
+            "        if name.split('.')[0] == 'sympy':\n"
+            "            raise ModuleNotFoundError('No module named sympy')\n"
+            "sys.meta_path.insert(0, Block())\n"
+            "import robotadapt as ra\n"
+            "arm = ra.planar(3, lengths=[1.0, 0.8, 0.5], masses=[2.0, 1.0, 0.5])\n"
+            "tree = ra.dh_arm([{'a': 1.0, 'm': 1.0}, {'a': 0.5, 'm': 0.5}])\n"
+            "print(type(arm).__name__, arm.p, type(tree).__name__)\n")
+    env = {**__import__("os").environ, "ROBOTADAPT_CACHE": str(tmp_path)}  # nothing derived before
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert out.returncode == 0, out.stderr[-500:]
+    assert out.stdout.split() == ["KinematicTree", "30", "KinematicTree"]

@@ -23,6 +23,7 @@ from hypothesis import strategies as st
 from robotadapt.robots import TwoLinkArm
 from robotadapt.robots import dh as dh_module
 from robotadapt.robots.base import RobotModel
+from robotadapt.robots.catalog import planar
 from robotadapt.robots.symbolic import SymbolicArm, from_dh_table, planar_arm, puma560
 from robotadapt.studies.scenarios import load
 from robotadapt.validation import ConfigError
@@ -349,6 +350,8 @@ def test_the_disk_cache_is_exact_and_faster(tmp_path, monkeypatch):
     try:
         t0 = time.perf_counter()
         first = planar_arm(3, lengths=[0.31, 0.27, 0.23], rods=True)
+        assert not list(tmp_path.glob("dh/*/arm_*.py"))  # derived on first use, not at construction
+        assert first._code is not None
         miss = time.perf_counter() - t0
         files = list((tmp_path / "dh").glob("*/arm_*.py"))
         assert [f.name for f in files] == [first._code.path.name]
@@ -356,6 +359,7 @@ def test_the_disk_cache_is_exact_and_faster(tmp_path, monkeypatch):
         dh_module.compiled.cache_clear()
         t0 = time.perf_counter()
         second = planar_arm(3, lengths=[0.31, 0.27, 0.23], masses=[1.0, 2.0, 3.0], rods=True)  # other masses: same file
+        assert second._code is not None
         hit = time.perf_counter() - t0
     finally:
         dh_module.compiled.cache_clear()
@@ -400,7 +404,7 @@ def test_a_cache_miss_without_sympy_is_a_clear_error(tmp_path, monkeypatch):
     dh_module.compiled.cache_clear()
     try:
         with pytest.raises(ConfigError, match=r"^robot\.kind: deriving an arm from its DH table needs sympy"):
-            planar_arm(2, lengths=[0.43, 0.21])
+            planar(2, lengths=[0.43, 0.21], model="sympy")  # found at construction, before any work
     finally:
         dh_module.compiled.cache_clear()
 

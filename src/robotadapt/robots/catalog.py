@@ -80,7 +80,12 @@ def example_arm(name: str, locked_joints: Any = (), viscous: bool = False, coulo
 
 
 def _tree_or_sympy(arm: Any, model: str) -> RobotModel:
-    return arm if _check(model, DH_MODELS) == "sympy" else KinematicTree.from_symbolic(arm)
+    """`arm` itself, derived now (so that a missing sympy is found before any work), or the same arm on the kinematic
+    tree (no sympy)."""
+    if _check(model, DH_MODELS) == "sympy":
+        _ = arm._code
+        return arm
+    return KinematicTree.from_symbolic(arm)
 
 
 def dh_arm(links: Any, convention: str = "standard", g: Any = (0.0, 0.0, -9.81), model: str = "tree", *,

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -61,7 +62,6 @@ class SymbolicArm(SerialChain, RobotModel):
     smooth_coulomb: Any = None
     offset: Any = None
     smooth_coulomb_velocity: Any = SMOOTH_VELOCITY
-    _code: Compiled = field(init=False, repr=False, metadata={"internal": True})
 
     def __post_init__(self) -> None:
         if not isinstance(self.joints, str) or not self.joints or set(self.joints) - {"R", "P"}:
@@ -88,7 +88,6 @@ class SymbolicArm(SerialChain, RobotModel):
             if np.any(limits[:, 0] >= limits[:, 1]):
                 raise ConfigError("robot.q_limits", "each row is [lower, upper] with lower < upper")
             set_(self, "q_limits", limits)
-        set_(self, "_code", compiled(self.geometry))
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle (processes, Dask workers, deepcopy) without the compiled code, which is reloaded from the cache."""
@@ -97,7 +96,12 @@ class SymbolicArm(SerialChain, RobotModel):
     def __setstate__(self, state: dict[str, Any]) -> None:
         for key, value in state.items():
             object.__setattr__(self, key, value)
-        object.__setattr__(self, "_code", compiled(self.geometry))
+
+    @cached_property
+    def _code(self) -> Compiled:
+        """The generated functions of the geometry (derived by sympy, or loaded from the disk cache), on first use: an
+        arm that is only handed to the kinematic tree (`model = "tree"`) needs no sympy."""
+        return compiled(self.geometry)
 
     # -- structure ----------------------------------------------------------------------------------------------------
 
