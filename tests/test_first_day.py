@@ -136,3 +136,24 @@ def test_the_planar_and_dh_arms_on_the_kinematic_tree_need_no_sympy(tmp_path: Pa
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert out.returncode == 0, out.stderr[-500:]
     assert out.stdout.split() == ["KinematicTree", "30", "KinematicTree"]
+
+
+def test_export_check_builds_the_harness_and_compares_it_with_the_python_step(tmp_path: Path,
+                                                                              capsys: pytest.CaptureFixture) -> None:
+    import json
+
+    from robotadapt.cli.export_cmd import _check
+    from robotadapt.native.build import compiler
+    from robotadapt.validation import ConfigError
+
+    if compiler() is None:
+        pytest.skip("no C compiler")
+    assert main(["export", "example-6.3.1", "--out", str(tmp_path / "c"), "--check", "300"]) == 0
+    record = json.loads((tmp_path / "c" / "export.json").read_text())
+    assert record["check"]["ticks"] == 300 and record["check"]["max_rel_difference"] <= 1e-12
+    assert "checked:" in capsys.readouterr().out
+    wrong = tmp_path / "wrong"  # a harness that answers τ = 0 on every line
+    wrong.write_text("#!/bin/sh\nwhile read line; do echo 0 0; done\n")
+    wrong.chmod(0o755)
+    with pytest.raises(ConfigError, match="differs from the Python step"):
+        _check("example-6.3.1", [], wrong, 50)
