@@ -5,7 +5,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from .common import add_figure_arguments, add_scenario_arguments, figure_format, overrides
 
@@ -47,6 +51,7 @@ def main(args: argparse.Namespace) -> int:
     from ..studies.scenarios import load
     from ..studies.tune import tune
 
+    started = time.perf_counter()
     output = figure_format(args)
     scenario = load(args.scenario, overrides(args))
     out = writable_dir(args.out if args.out is not None else Path("results") / f"tune-{scenario.name}")
@@ -67,16 +72,37 @@ def main(args: argparse.Namespace) -> int:
     print(f"tune {scenario.name}: {summary['objective_expression']} {tuned.before.objective:.4g} -> "
           f"{tuned.after.objective:.4g}, max |τ| {tuned.before.max_abs_torque:.4g} -> {tuned.after.max_abs_torque:.4g}"
           f" in {summary['differentiated_runs']} differentiated runs (+ {summary['forward_runs']} forward runs: the "
-          f"screen, the start and the answer), {tuned.wall_time:.3g} s; {gains}")
+          f"screen, the start and the answer), {time.perf_counter() - started:.3g} s in all (the search "
+          f"{tuned.wall_time:.3g} s); {gains}")
     print(f"wrote {out}/")
     if not tuned.feasible:
         hint = ""
         if summary["peak_elasticity"]:  # the gain that moves the peak most, and which way to move it
             name, value = max(summary["peak_elasticity"].items(), key=lambda kv: abs(kv[1]))
-            hint = (f"; the peak moves most with {name} (∂ln max|τ|/∂ln gain = {value:.2g}: "
-                    f"{'lower' if value > 0 else 'raise'} it, or widen its range)")
+            way = "lower" if value > 0 else "raise"
+            edge = _at_edge(tuned, name, way)
+            hint = (f"; of the gains varied, the peak moves most with {name} (∂ln max|τ|/∂ln gain = {value:.2g}: "
+                    + (f"{way} it" if edge is None else f"it is at the {edge} of its range: widen it") +
+                    "; a gain not varied may set the peak: vary it too)")
         print(f"robotadapt: no gains found meet the budget max |τ| ≤ {args.max_torque:g} (best found: "
               f"{tuned.after.max_abs_torque:.4g}{'' if tuned.after.ok else ', diverged'}){hint}; kept in "
               f"{out}/tuned.toml")
         return EXIT_BUDGET
     return 0
+
+
+def _at_edge(tuned: Any, field: str, way: str) -> str | None:
+    """"top"/"bottom" when the tuned `field` sits at the end of its range that `way` ("raise"/"lower") asks to move it
+    past, else None (a gain without a box has no end)."""
+    from ..studies.gain_space import split
+
+    for gain, part in zip(tuned.gains, split(tuned.gains, tuned.theta), strict=True):
+        if gain.field != field or gain.lower is None:
+            continue
+        ends = gain.bounds()  # log-space (low, high) per entry, as the search's θ
+        theta = np.ravel(part)
+        if way == "raise" and any(t >= hi - 1e-6 for t, (_, hi) in zip(theta, ends, strict=False) if hi is not None):
+            return "top"
+        if way == "lower" and any(t <= lo + 1e-6 for t, (lo, _) in zip(theta, ends, strict=False) if lo is not None):
+            return "bottom"
+    return None

@@ -471,12 +471,15 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
             row = _row(replace(entry, scenario=tuned.scenario, source=f"{entry.source}; tuned: {', '.join(fields)}",
                                note="; ".join(filter(None, (entry.note, _over_budget(summary))))), progress)
             row.metrics.update(tuned_gains=summary["gains"], tune_runs=summary["runs"],
+                               tune_differentiated_runs=summary["differentiated_runs"],
                                tune_converged=tuned.search.converged)
         row.metrics["within_budget"] = row.result.ok and row.metrics["peak_torque"] <= max_torque
         row.metrics["objective"] = goal.of_metrics(metrics(row.result))
         rows.append(row)
         if progress:
             print(f"{entry.name}: {row.result.status}, RMS ‖e‖ {row.metrics['rms_error_norm']:.4g}, peak |τ| "
-                  f"{row.metrics['peak_torque']:.4g}, {row.metrics['tune_runs']} tuning runs"
+                  f"{row.metrics['peak_torque']:.4g}, " + (f"{row.metrics['tune_differentiated_runs']} differentiated "
+                  f"runs (--tune-runs) + {row.metrics['tune_runs'] - row.metrics['tune_differentiated_runs']} forward"
+                  if row.metrics.get("tune_differentiated_runs") is not None else "lineup gains")
                   + (", converged" if row.metrics["tune_converged"] else ""), flush=True)
     return rows, skipped

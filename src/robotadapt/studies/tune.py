@@ -465,7 +465,8 @@ class Tuned:
     def summary(self) -> dict[str, Any]:
         """tune.json: objective, max_abs_torque, gains, iterations (objective, constraint, gradient norm), wall_time;
         `runs` counts every simulation: `differentiated_runs` (what --max-runs bounds, what the figure counts) and
-        `forward_runs`, the normal runs that score the start and the answer."""
+        `forward_runs`, the normal runs that score the start and the answer; `converged` the search ended by its own
+        test with an answer within the budget (`search_converged`: by its own test, whatever the budget)."""
         return {
             "scenario": self.scenario.name, "objective": self.after.objective, "objective_expression": self.objective.text,
             "terms": self.after.terms, "max_abs_torque": self.after.max_abs_torque, "max_torque": self.max_torque,
@@ -477,7 +478,9 @@ class Tuned:
                             "gradient_norm": it.gradient_norm, "runs": it.runs} for it in self.search.iterations],
             "runs": self.search.runs + self.forward_runs,
             "differentiated_runs": self.search.runs, "forward_runs": self.forward_runs,
-            "screened_runs": self.search.screened, "converged": self.search.converged,
+            "screened_runs": self.search.screened,
+            "converged": bool(self.search.converged and self.feasible),  # ended by its own test, within the budget
+            "search_converged": self.search.converged,
             "peak_elasticity": self.peak_elasticity,
             "over": None if self.over is None else {"plant.phi": self.over.tolist(),
                                                     "objective_per_sample": self.after.per_sample},
