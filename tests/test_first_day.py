@@ -157,3 +157,22 @@ def test_export_check_builds_the_harness_and_compares_it_with_the_python_step(tm
     wrong.chmod(0o755)
     with pytest.raises(ConfigError, match="differs from the Python step"):
         _check("example-6.3.1", [], wrong, 50)
+
+
+def test_compare_variants_side_by_side_equal_their_own_runs(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    import json
+
+    from robotadapt.analysis.metrics import metrics
+    from robotadapt.studies.scenarios import load
+
+    out = tmp_path / "v"
+    assert main(["compare", "example-6.3.1", "--t-final", "0.5", "--out", str(out),
+                 "--variant", 'controller.adaptation="none"', "--variant", "controller.Kv=20;controller.Lam=5"]) == 0
+    rows = json.loads((out / "comparison.json").read_text())["rows"]
+    assert [r["controller"] for r in rows] == ["as written", 'controller.adaptation="none"',
+                                               "controller.Kv=20; controller.Lam=5"]
+    for row, extra in zip(rows, ([], ['controller.adaptation="none"'], ["controller.Kv=20", "controller.Lam=5"]),
+                          strict=True):
+        alone = metrics(load("example-6.3.1", ["simulation.t_final=0.5", *extra]).run())
+        assert row["rms_error_norm"] == pytest.approx(alone["rms_error_norm"], rel=1e-12)
+    assert main(["compare", "example-6.3.1", "--variant", "controller.Kv=20", "--fair", "--max-torque", "100"]) == 2

@@ -27,6 +27,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     compare.add_argument("--controllers", metavar="A,B,C",
                          help="comma-separated names of the lineup: {lineup} (default: every one that applies to "
                               "the scenario)")
+    compare.add_argument("--variant", action="append", default=[], metavar="SECTION.KEY=VALUE[;...]",
+                         help="compare the scenario as written with itself under these overrides, side by side "
+                              "(repeatable: one row each; several overrides of one row separated by ';'), e.g. "
+                              "--variant 'controller.adaptation=\"natural\"' --variant 'controller.adaptation=\"none\"'")
     compare.add_argument("--fair", action="store_true",
                          help="tune every law's own gains to the same --objective under the same --max-torque first "
                               "(robotadapt tune), then compare; laws that cannot be differentiated keep the lineup's "
@@ -58,6 +62,22 @@ def main(args: argparse.Namespace) -> int:
     if not args.fair and args.max_torque is not None:
         raise ConfigError("--max-torque", "applies to --fair (tuning every law under the budget)")
     base = load(args.scenario, overrides(args))
+    if args.variant:
+        if args.fair or args.controllers is not None:
+            raise ConfigError("--variant", "compares the scenario's own law under other settings: not with --fair or "
+                              "--controllers")
+        from ..studies.compare import run_entries, variants
+
+        settings = [[part.strip() for part in v.split(";") if part.strip()] for v in args.variant]
+        if not all(settings):
+            raise ConfigError("--variant", f"expected SECTION.KEY=VALUE[;...] each, got {args.variant!r}")
+        rows = run_entries(variants(base, settings, lambda extra: load(args.scenario, [*overrides(args), *extra])),
+                           progress=True)
+        out = args.out if args.out is not None else Path("results") / base.name / "variants"
+        path = write_comparison(base, rows, {}, out, None, output)
+        print(table_text(rows))
+        print(f"wrote {path}")
+        return 0 if all(r.result.ok for r in rows) else 1
     if args.fair:
         from ..studies.compare import fair
 

@@ -398,12 +398,28 @@ def _row(entry: Entry, progress: bool) -> Row:
 def compare(base: Scenario, names: list[str] | None = None, progress: bool = False) -> tuple[list[Row], dict[str, str]]:
     """Run every entry of :func:`lineup`; returns the rows and the skipped names with why."""
     entries, skipped = lineup(base, names)
+    return run_entries(entries, progress), skipped
+
+
+def run_entries(entries: list[Entry], progress: bool = False) -> list[Row]:
+    """Each entry run as it stands, in order: the rows of a comparison."""
     rows = []
     for entry in entries:
         rows.append(_row(entry, progress))
         if progress:
             print(f"{entry.name}: {rows[-1].result.status}, {rows[-1].result.wall_time:.1f} s", flush=True)
-    return rows, skipped
+    return rows
+
+
+def variants(base: Scenario, settings: list[list[str]], load: Any) -> list[Entry]:
+    """The scenario as written, then one entry per variant: its overrides (`SECTION.KEY=VALUE`, as --set takes them)
+    applied by `load(overrides)` on top of the scenario's own — natural against Euclidean against no adaptation, one
+    law at two control periods — each row named by what it changes."""
+    entries = [Entry("as written", "as written", "the scenario as written", base, reference=True)]
+    for assignments in settings:
+        text = "; ".join(assignments)
+        entries.append(Entry(text, text, f"the scenario with {text}", load(assignments)))
+    return entries
 
 
 def tunable(scenario: Scenario) -> list[str]:
