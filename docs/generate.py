@@ -282,7 +282,7 @@ MEANINGS = {
     "period": ("period of the trajectory (default: the trajectory's)", "s", "6.28"),
     "trajectory.fourier.period": ("the base period T_f of the Fourier series, ω_f = 2π/T_f (Swevers et al. 1997)", "s",
                                   "10.0"),
-    "trajectory.fourier.a": ("a_il, the sine coefficients of q̇: a table [joint][harmonic] of n rows of K, or a list of "
+    "trajectory.fourier.a": ("a_il, the sine coefficients of q̇: a table `[joint][harmonic]` of n rows of K, or a list of "
                              "K for every joint", "rad/s", "[0.3, 0.1]"),
     "trajectory.fourier.b": ("b_il, the cosine coefficients of q̇ (as `a`)", "rad/s", "[0.0, 0.2]"),
     "u_min": ("lower saturation of the learned torque", "N m", "-50"), "u_max": ("upper saturation", "N m", "50"),

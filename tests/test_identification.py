@@ -12,7 +12,7 @@ import pytest
 import tomli_w
 import tomllib
 
-from robotadapt.analysis.identification import Preprocessing, identify, samples
+from robotadapt.analysis.identification import Preprocessing, derivatives, identify, lowpass, split
 from robotadapt.analysis.joint_data import JointData, read
 from robotadapt.cli import main
 from robotadapt.robots.consistency import parts, smallest_eigenvalues
@@ -55,19 +55,17 @@ def test_savitzky_golay_derivatives_are_exact_on_a_polynomial_of_their_order():
     q = sum(c[k] * t[:, None] ** k for k in range(7))
     dq = sum(k * c[k] * t[:, None] ** (k - 1) for k in range(1, 7))
     ddq = sum(k * (k - 1) * c[k] * t[:, None] ** (k - 2) for k in range(2, 7))
-    s = samples(JointData(t, q, None, 0 * q, "poly"), Preprocessing())
-    assert np.max(np.abs(s.dq - dq)) < 1e-8 * np.max(np.abs(dq))
-    assert np.max(np.abs(s.ddq - ddq)) < 1e-7 * np.max(np.abs(ddq))
+    _, dq_sg, ddq_sg = derivatives(JointData(t, q, None, 0 * q, "poly"), 9, 6)
+    assert np.max(np.abs(dq_sg - dq)) < 1e-8 * np.max(np.abs(dq))
+    assert np.max(np.abs(ddq_sg - ddq)) < 1e-7 * np.max(np.abs(ddq))
 
 
 def test_the_zero_phase_filter_passes_a_slow_sine_without_lag_and_removes_a_fast_one():
     t = np.arange(0.0, 10.0, 1e-3)
     slow, fast = np.sin(2 * np.pi * 0.5 * t), 0.3 * np.sin(2 * np.pi * 80 * t)
-    x = (slow + fast)[:, None]
-    s = samples(JointData(t, x, None, x, "sines"), Preprocessing(cutoff=10.0))
-    keep = (t >= s.t[0] - 1e-12) & (t <= s.t[-1] + 1e-12)
-    assert s.t[0] == pytest.approx(0.3)  # 3/cutoff trimmed
-    assert np.max(np.abs(s.q[:, 0] - slow[keep])) < 2e-3  # no lag: a causal filter would be off by ~0.1 here
+    y = lowpass((slow + fast)[:, None], 10.0, 1e3)[:, 0]
+    inner = (t > 0.3) & (t < 9.7)  # 3/cutoff from each end
+    assert np.max(np.abs(y - slow)[inner]) < 2e-3  # no lag: a causal filter would be off by ~0.1 here
 
 
 def test_noise_free_data_give_the_base_parameters_and_pinocchio_agrees(panda):
@@ -79,16 +77,16 @@ def test_noise_free_data_give_the_base_parameters_and_pinocchio_agrees(panda):
 
     data = inverse_dynamics_data(panda)
     model, phi = panda.controller.model, panda.plant.phi
-    res = identify(model, data, Preprocessing(), holdout=0.25)
+    res = identify(model, data, Preprocessing(cutoff=None), holdout=0.25)
     for name in ("ols", "wls", "consistent"):
         assert base_error(res.base[name], res.basis, phi) < 1e-8, name
-    assert max(np.max(v) for v in res.holdout_rms.values()) < 1e-6
+    assert max(np.max(v) for k, v in res.holdout_rms.items() if k != "prior") < 1e-6
     path, locked = example_urdf("panda")
     pmodel = urdf_model(path, locked, None, "robot.path", "robot.locked_joints")
     pdata = pmodel.createData()
-    fit, _ = samples(data, Preprocessing()).split(0.25)
-    rows = [pin.computeJointTorqueRegressor(pmodel, pdata, q, v, a).copy() for q, v, a in zip(fit.q, fit.dq, fit.ddq,
-                                                                                              strict=True)]
+    fit, _ = split(data, 0.25)
+    q, dq, ddq = derivatives(fit, 9, 6)
+    rows = [pin.computeJointTorqueRegressor(pmodel, pdata, *x).copy() for x in zip(q, dq, ddq, strict=True)]
     phi_pin = np.linalg.lstsq(np.concatenate(rows), fit.tau.reshape(-1), rcond=None)[0]  # minimum-norm standard φ
     assert base_error(res.base["ols"], res.basis, phi_pin) < 1e-9
     assert base_error(res.basis.K @ phi_pin, res.basis, phi) < 1e-8
@@ -100,19 +98,20 @@ def test_noise_free_simulated_run_gives_the_base_parameters(tmp_path, panda):
     assert main(["run", "panda-slotine-li", "--out", str(tmp_path), "--no-plots", "--dt", "2.5e-4", "--t-final", "8",
                  "--set", "simulation.log_every=4"]) == 0
     data = read(tmp_path / "result.npz", 7)
-    res = identify(panda.controller.model, data, Preprocessing(trim=0.1), consistent=False)
+    res = identify(panda.controller.model, data, Preprocessing(cutoff=None, trim=0.1), consistent=False)
     for name in ("ols", "wls"):
         assert base_error(res.base[name], res.basis, panda.plant.phi) < 1e-8, name
 
 
-def test_the_covariance_is_honest_under_torque_noise(panda):
-    """Noise of known σ on τ (independent draws): each WLS error is within 5 of its own standard deviations, their mean
-    square ≈ 1, the estimated σ_i match, and the error's expected size √tr C grows tenfold with the noise."""
+def test_the_covariance_is_honest_under_white_torque_noise(panda):
+    """Noise of known σ on τ, unfiltered (independent samples): each WLS error is within 5 of its own standard
+    deviations, their mean square ≈ 1, the estimated σ_i match, and the error's expected size √tr C grows tenfold with
+    the noise. Filtered data: tests/test_identify_uncertainty.py."""
     model, phi = panda.controller.model, panda.plant.phi
     spread = []
     for noise in (0.01, 0.1):
-        res = identify(model, inverse_dynamics_data(panda, noise=noise, seed=int(1000 * noise)), Preprocessing(),
-                       consistent=False)
+        res = identify(model, inverse_dynamics_data(panda, noise=noise, seed=int(1000 * noise)),
+                       Preprocessing(cutoff=None), consistent=False)
         z = (res.base["wls"] - res.basis.K @ phi) / np.sqrt(np.diag(res.covariance))
         assert np.max(np.abs(z)) < 5.0
         assert 0.3 < np.mean(z**2) < 3.0
@@ -129,7 +128,7 @@ def test_the_consistent_estimate_stays_physical_where_least_squares_does_not(pan
     bad[60] = -0.3  # m7
     data = inverse_dynamics_data(panda, phi=bad, noise=0.01)
     eps = 1e-6
-    res = identify(model, data, Preprocessing(), epsilon=eps)
+    res = identify(model, data, Preprocessing(cutoff=None), epsilon=eps)
     layout = parts(model.param_names)
     assert np.min(smallest_eigenvalues(res.standard["wls"], layout)) < -0.01
     eigs = smallest_eigenvalues(res.standard["consistent"], layout)
@@ -161,7 +160,8 @@ def test_identify_writes_an_estimate_a_scenario_starts_from(tmp_path, capsys):
     assert main(["identify", str(csv), "--robot", "example-6.3.1", "--out", str(out), "--no-plots"]) == 0
     record = json.loads((out / "identified.json").read_text())
     truth = load("example-6.3.1").setup.plant.phi
-    assert np.allclose(record["phi"], truth, rtol=1e-8)
+    assert np.allclose(record["phi"], truth, rtol=1e-6)  # the default low-pass: W and τ alike, so no bias
+    assert record["preprocessing"]["cutoff_source"] == "spectrum" and record["preprocessing"]["decimate"] > 1
     assert record["estimate"] == "consistent" and (out / "identified.md").exists()
     assert "wrote" in capsys.readouterr().out
     scenario = tmp_path / "start.toml"
@@ -169,7 +169,7 @@ def test_identify_writes_an_estimate_a_scenario_starts_from(tmp_path, capsys):
     data["controller"]["phi_hat0"] = {"file": "id/identified.json"}
     scenario.write_text(tomli_w.dumps(data))
     sc = load(scenario)  # relative to the scenario file's folder
-    assert np.allclose(sc.setup.controller.phi_hat0, truth, rtol=1e-8)
+    assert np.allclose(sc.setup.controller.phi_hat0, truth, rtol=1e-6)
 
 
 @pytest.mark.parametrize("change, words", [
@@ -242,8 +242,9 @@ def test_the_identified_urdf_reads_back_as_the_parameters_written(tmp_path, pand
 def test_the_identification_study_closes_the_loop(tmp_path):
     """examples/identification_study.py end to end (about 140 s): the optimised trajectory is better conditioned than the
     packaged one by two orders; the log of an arm with unmodelled friction, quantisation and noise identifies the base
-    parameters within 1 % with friction columns (worse without); under the natural law and a payload, the identified
-    start keeps a smaller base error and tracking error before the payload than the 30 % low one."""
+    parameters within 0.5 % with friction columns, 3× worse without (measured 0.0019 and 0.0097); under the natural law
+    and a payload, the identified start keeps a smaller base error and tracking error before the payload than the
+    30 % low one."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("identification_study",
@@ -254,7 +255,7 @@ def test_the_identification_study_closes_the_loop(tmp_path):
     ex = study["excitation"]["cond"]
     assert ex["cond"] < ex["cond_packaged"] / 100
     ident = study["closed_loop"]["identify"]
-    assert ident["friction columns"]["base_error"] < 0.01 < ident["friction-free model"]["base_error"]
+    assert ident["friction columns"]["base_error"] < min(0.005, ident["friction-free model"]["base_error"] / 3)
     runs = study["closed_loop"]["payload"]
     good, low = runs["natural, γ = 0.1 | identified"], runs["natural, γ = 0.1 | 30 % low"]
     assert good["base_error_at_10"] < low["base_error_at_10"] / 2 and good["rms_deg_0_10"] < low["rms_deg_0_10"]

@@ -1,5 +1,6 @@
 """The figures of identification (docs/identification.md): `robotadapt excite`'s trajectory against its limits and its
-regressor's singular values, and `robotadapt identify`'s held-out torque against each estimate's prediction."""
+regressor's singular values, and `robotadapt identify`'s held-out torque and validation log's torque against each
+estimate's prediction."""
 
 from __future__ import annotations
 
@@ -9,45 +10,64 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..analysis.identification import Identification
+from ..analysis.identification import Identification, Prediction
 from ..robots.base import RobotModel
 from ..robots.identifiability import base_parameters
 from ..studies.excite import Excitation, stacked_regressor
 from ..trajectories import Trajectory
 from .output import PNG, FigureFormat, new_figure, save_figure
 
-STYLES = {"consistent": "-", "wls": "--", "ols": ":", "prior": "-."}
+STYLES = {"consistent": "-", "wls": "--", "ols": ":", "prior": "-.", "nominal": (0, (1, 3))}
 
 
-def holdout_plot(result: Identification, title: str = "") -> Figure:
-    """One panel per joint: the held-out torque and its prediction by each estimate and the prior, with RMS errors."""
-    n = result.holdout_tau.shape[1]
+def prediction_plot(prediction: Prediction, title: str = "") -> Figure:
+    """One panel per joint: the measured torque of one log (after its own filtering) and its prediction by each
+    estimate and the prior, with RMS errors in the legend."""
+    n = prediction.tau.shape[1]
     cols = 2 if n > 3 else 1
     rows = -(-n // cols)
     fig = new_figure(figsize=(7 * cols, 1.9 * rows + 0.8))
     axes = fig.subplots(rows, cols, sharex=True, squeeze=False)
-    rms = result.holdout_rms
+    rms = prediction.rms
     for i, ax in enumerate(axes.flat):
         if i >= n:
             ax.set_visible(False)
             continue
-        ax.plot(result.holdout_t, result.holdout_tau[:, i], color="k", linewidth=1.6, label="measured")
-        for name, tau in result.holdout_prediction.items():
-            ax.plot(result.holdout_t, tau[:, i], STYLES.get(name, "-"), linewidth=1.0,
+        ax.plot(prediction.t, prediction.tau[:, i], color="k", linewidth=1.6, label="measured")
+        for name, tau in prediction.predicted.items():
+            ax.plot(prediction.t, tau[:, i], linestyle=STYLES.get(name, "-"), linewidth=1.0,
                     label=f"{name} (RMS {rms[name][i]:.3g})")
         ax.set_ylabel(f"$\\tau_{{{i + 1}}}$")
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper right", fontsize="x-small")
     for ax in axes[-1]:
         ax.set_xlabel("time $t$ (s)")
-    fig.suptitle(f"{title}: held-out torque (N·m or N) and its prediction".lstrip(": "))
+    fig.suptitle(title)
     fig.tight_layout()
     return fig
+
+
+def holdout_plot(result: Identification, title: str = "") -> Figure:
+    """:func:`prediction_plot` of the held-out part of the log."""
+    return prediction_plot(result.holdout, f"{title}: held-out torque (N·m or N) and its prediction".lstrip(": "))
+
+
+def validation_plot(result: Identification, title: str = "") -> Figure:
+    """:func:`prediction_plot` of the validation log (`--validate`)."""
+    if result.validation is None:
+        raise ValueError("the identification has no validation log")
+    return prediction_plot(result.validation, f"{title}: torque of the validation log {result.validation.source} "
+                           "(N·m or N) and its prediction".lstrip(": "))
 
 
 def holdout_figure(result: Identification, path: Path, title: str = "", output: FigureFormat = PNG) -> Path:
     """:func:`holdout_plot` written to `path` in `output`'s format."""
     return save_figure(holdout_plot(result, title), path, output)
+
+
+def validation_figure(result: Identification, path: Path, title: str = "", output: FigureFormat = PNG) -> Path:
+    """:func:`validation_plot` written to `path` in `output`'s format."""
+    return save_figure(validation_plot(result, title), path, output)
 
 
 def excitation_plot(model: RobotModel, result: Excitation, old: Trajectory, compared: dict[str, Any],
