@@ -119,19 +119,25 @@ def test_on_the_book_arm_made_twice_as_heavy_every_law_but_composite_repeats_the
 def test_every_law_starts_from_the_scenarios_estimate_or_says_why_not(planar):
     phi_hat0 = planar.setup.controller.phi_hat0  # 0.7 × the true φ
     entries, skipped = lineup(planar)
+    nominal = planar.setup.controller.model.default_phi  # the fixed-estimate baselines hold the nominal model
     for e in entries:
         got = getattr(e.scenario.setup.controller, "phi_hat0", None)
         if got is not None:
-            np.testing.assert_array_equal(got, phi_hat0, err_msg=e.name)
+            want = nominal if e.name in ("pd_gravity", "computed_torque") else phi_hat0
+            np.testing.assert_array_equal(got, want, err_msg=e.name)
     assert "adaptive_computed_torque" in skipped and "true parameters outside" in skipped["adaptive_computed_torque"]
-    # the book's arm, φ̂(0) = 0: adaptive computed torque projected into its box, computed torque refused (M̂ = 0)
-    entries, skipped = lineup(load("example-6.3.1"))
+    # the book's arm, φ̂(0) = 0: adaptive computed torque projected into its box; the baselines hold the true φ (the
+    # arm has no nominal values), so computed torque runs (its M̂ is M)
+    book = load("example-6.3.1")
+    entries, skipped = lineup(book)
     acr = _by_name(entries)["adaptive_computed_torque"]
     np.testing.assert_array_equal(acr.scenario.setup.controller.phi_hat0, [0.1, 0.1])
     assert "2 of 2 entries projected into the box" in acr.note
-    assert "singular" in skipped["computed_torque"]
+    assert "computed_torque" not in skipped
     for e in entries:
-        if e.name != "adaptive_computed_torque" and hasattr(e.scenario.setup.controller, "phi_hat0"):
+        if e.name in ("pd_gravity", "computed_torque"):
+            np.testing.assert_array_equal(e.scenario.setup.controller.phi_hat0, book.setup.plant.phi, err_msg=e.name)
+        elif e.name != "adaptive_computed_torque" and hasattr(e.scenario.setup.controller, "phi_hat0"):
             np.testing.assert_array_equal(e.scenario.setup.controller.phi_hat0, [0.0, 0.0], err_msg=e.name)
 
 

@@ -41,9 +41,9 @@ def polar():
 
 @pytest.fixture(scope="module")
 def comparison():
-    """Every law of the lineup on Example 6.3.1's arm, 0.05 s (fixed computed torque cannot hold its φ̂(0) = 0)."""
+    """Every law of the lineup on Example 6.3.1's arm, 0.05 s."""
     rows, skipped = compare(load("example-6.3.1", ["simulation.t_final=0.05"]))
-    assert list(skipped) == ["computed_torque"]
+    assert not skipped
     return rows
 
 
@@ -179,7 +179,7 @@ def test_compare_figure_gives_every_law_its_own_colour_and_dash(comparison):
                 styles.setdefault(line.get_label(), set()).add((line.get_color(), line.get_linestyle()))
     assert set(styles) == labels and all(len(s) == 1 for s in styles.values())
     pairs = [next(iter(s)) for s in styles.values()]
-    assert len(set(pairs)) == len(comparison) == len(contenders()) - 1 == 11
+    assert len(set(pairs)) == len(comparison) == len(contenders()) == 12
     assert len({color for color, _ in pairs}) >= 10 and len({dash for _, dash in pairs}) >= 3
     visible = [ax for ax in fig.axes if ax.get_visible()]
     assert len(visible) >= 3 and all(len(ax.get_lines()) <= 6 for ax in visible)  # small multiples, not 12 on one

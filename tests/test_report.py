@@ -27,7 +27,7 @@ CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-back
                   "--disable-component-update", "--disable-sync", "--no-first-run")
 FIGURES = ("tracking_error.png", "parameters.png", "torques.png")
 # the lineup on Example 6.3.1: computed torque from its φ̂(0) = 0 has M̂ = 0 and is skipped (robotadapt.studies.compare)
-APPLY = [name for name in contenders() if name != "computed_torque"]
+APPLY = list(contenders())  # every law applies: the fixed-estimate baselines hold the nominal model
 
 
 class Elements(HTMLParser):
@@ -98,7 +98,7 @@ def test_comparison_has_one_row_per_controller_and_embedded_figures(comparison):
         assert (comparison / f"{name}.png").read_bytes() in {base64.b64decode(src.split(",", 1)[1]) for src in images}
     data = json.loads((comparison / "comparison.json").read_text())
     assert [r["controller"] for r in data["rows"]] == APPLY
-    assert list(data["skipped"]) == ["computed_torque"] and "singular" in data["skipped"]["computed_torque"]
+    assert not data["skipped"]
     for row in data["rows"]:
         assert row["status"] == "ok"
         assert row["us_per_step"] > 0 and row["peak_torque"] > 0 and row["rms_error_norm"] > 0
@@ -127,7 +127,7 @@ def test_the_scenarios_own_controller_takes_its_place_in_the_lineup():
     own = load("problem-6.4-1", ["controller.servo={kind = 'pd', Lam = 2.5}"])
     entries, skipped = lineup(own)
     assert entries[-1].name == "scenario" and entries[-1].reference
-    assert list(skipped) == ["computed_torque"] and len(entries) == len(contenders())  # φ̂(0) = 0: M̂ = 0
+    assert not skipped and len(entries) == len(contenders()) + 1  # the baselines hold the true φ: M̂ = M
 
 
 def test_comparison_on_a_non_periodic_trajectory_skips_the_repetitive_law(tmp_path):
@@ -136,7 +136,7 @@ def test_comparison_on_a_non_periodic_trajectory_skips_the_repetitive_law(tmp_pa
     assert code == 0 and "Slotine–Li" in stdout
     entries, skipped = lineup(load("example-6.5.1"))
     assert "repetitive" in skipped and "periodic" in skipped["repetitive"]
-    assert set(skipped) == {"repetitive", "computed_torque"} and len(entries) == len(contenders()) - 2  # φ̂(0) = 0: M̂ = 0
+    assert set(skipped) == {"repetitive"} and len(entries) == len(contenders()) - 1
 
 
 @pytest.mark.parametrize(("argv", "field"), [

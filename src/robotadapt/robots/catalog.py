@@ -79,13 +79,11 @@ def example_arm(name: str, locked_joints: Any = (), viscous: bool = False, coulo
     return arm if gravity is None else replace(arm, g=np.asarray(gravity, dtype=float))
 
 
-def _tree_or_sympy(arm: Any, model: str) -> RobotModel:
-    """`arm` itself, derived now (so that a missing sympy is found before any work), or the same arm on the kinematic
-    tree (no sympy)."""
+def _tree_or_sympy(make: Any, model: str) -> RobotModel:
+    """The arm `make(derive)` builds: derived by sympy, or its link data on the kinematic tree (no sympy)."""
     if _check(model, DH_MODELS) == "sympy":
-        _ = arm._code
-        return arm
-    return KinematicTree.from_symbolic(arm)
+        return make(True)
+    return KinematicTree.from_symbolic(make(False))
 
 
 def dh_arm(links: Any, convention: str = "standard", g: Any = (0.0, 0.0, -9.81), model: str = "tree", *,
@@ -106,8 +104,8 @@ def puma560_arm(rotor_inertia: bool = False, viscous: bool = False, coulomb: boo
     """The PUMA 560 of :func:`robotadapt.robots.symbolic.puma560` (published parameters, joint limits)."""
     from .symbolic import puma560
 
-    arm = puma560(rotor_inertia, viscous, coulomb, smooth_coulomb, offset, smooth_coulomb_velocity)
-    return _tree_or_sympy(arm, model)
+    return _tree_or_sympy(lambda derive: puma560(rotor_inertia, viscous, coulomb, smooth_coulomb, offset,
+                                                 smooth_coulomb_velocity, derive=derive), model)
 
 
 def planar(n_links: int, lengths: Any = 1.0, masses: Any = 1.0, rods: bool = False, g: float = 9.8,
@@ -117,6 +115,6 @@ def planar(n_links: int, lengths: Any = 1.0, masses: Any = 1.0, rods: bool = Fal
     """The n-link planar arm of :func:`robotadapt.robots.symbolic.planar_arm`."""
     from .symbolic import planar_arm
 
-    arm = planar_arm(n_links, lengths, masses, rods, g, rotor_inertia, viscous, coulomb, smooth_coulomb, offset,
-                     smooth_coulomb_velocity)
-    return _tree_or_sympy(arm, model)
+    return _tree_or_sympy(lambda derive: planar_arm(n_links, lengths, masses, rods, g, rotor_inertia, viscous, coulomb,
+                                                    smooth_coulomb, offset, smooth_coulomb_velocity, derive=derive),
+                          model)

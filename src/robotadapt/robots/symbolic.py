@@ -18,8 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
-from functools import cached_property
+from dataclasses import InitVar, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -62,8 +61,10 @@ class SymbolicArm(SerialChain, RobotModel):
     smooth_coulomb: Any = None
     offset: Any = None
     smooth_coulomb_velocity: Any = SMOOTH_VELOCITY
+    derive: InitVar[bool] = True  # False: the link data only, for the kinematic tree (no sympy, no generated code)
+    _code: Compiled | None = field(init=False, repr=False, metadata={"internal": True})
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, derive: bool = True) -> None:
         if not isinstance(self.joints, str) or not self.joints or set(self.joints) - {"R", "P"}:
             raise ConfigError("robot.joints", f"expected a string of 'R' (revolute) and 'P' (prismatic), got "
                               f"{self.joints!r}")
@@ -88,6 +89,7 @@ class SymbolicArm(SerialChain, RobotModel):
             if np.any(limits[:, 0] >= limits[:, 1]):
                 raise ConfigError("robot.q_limits", "each row is [lower, upper] with lower < upper")
             set_(self, "q_limits", limits)
+        set_(self, "_code", compiled(self.geometry) if derive else None)
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle (processes, Dask workers, deepcopy) without the compiled code, which is reloaded from the cache."""
@@ -96,12 +98,7 @@ class SymbolicArm(SerialChain, RobotModel):
     def __setstate__(self, state: dict[str, Any]) -> None:
         for key, value in state.items():
             object.__setattr__(self, key, value)
-
-    @cached_property
-    def _code(self) -> Compiled:
-        """The generated functions of the geometry (derived by sympy, or loaded from the disk cache), on first use: an
-        arm that is only handed to the kinematic tree (`model = "tree"`) needs no sympy."""
-        return compiled(self.geometry)
+        object.__setattr__(self, "_code", compiled(self.geometry))
 
     # -- structure ----------------------------------------------------------------------------------------------------
 
@@ -125,6 +122,9 @@ class SymbolicArm(SerialChain, RobotModel):
     def _eval(self, name: str, shape: tuple[int, ...], *args: Array) -> Array:
         """Call the generated function `name` and place its nonzero values into an array `(..., *shape)`."""
         code = self._code
+        if code is None:
+            raise ConfigError("robot.model", "this arm was built for the kinematic tree (derive=False): build it with "
+                              "model = \"sympy\" to evaluate its generated code")
         pos, src, size = code.positions[name], code.sources[name], math.prod(shape)
         if all(type(x) is np.ndarray and x.ndim == 1 for x in args):  # one state: Python floats through `math`
             vals = code.scalar[name](*[x.tolist() for x in args])
@@ -286,7 +286,8 @@ def from_dh_table(links: Sequence[dict[str, Any]], convention: str = "standard",
 
 def planar_arm(n_links: int, lengths: Any = 1.0, masses: Any = 1.0, rods: bool = False, g: float = 9.8,
                rotor_inertia: Any = None, viscous: Any = None, coulomb: Any = None, smooth_coulomb: Any = None,
-               offset: Any = None, smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> SymbolicArm:
+               offset: Any = None, smooth_coulomb_velocity: Any = SMOOTH_VELOCITY, *,
+               derive: bool = True) -> SymbolicArm:
     """An n-link planar arm of revolute joints about parallel vertical-plane axes, angles from the horizontal, gravity
     along −y (the book's two-link arm is `planar_arm(2)` with φ = [m1, 0, …, m2, 0, …]).
 
@@ -313,7 +314,7 @@ def planar_arm(n_links: int, lengths: Any = 1.0, masses: Any = 1.0, rods: bool =
     zeros = np.zeros(n)
     return SymbolicArm("R" * n, length, zeros, zeros, zeros, mass, com, inertia, "standard", (0.0, -g, 0.0),
                        rotor_inertia, viscous, coulomb, smooth_coulomb=smooth_coulomb, offset=offset,
-                       smooth_coulomb_velocity=smooth_coulomb_velocity)
+                       smooth_coulomb_velocity=smooth_coulomb_velocity, derive=derive)
 
 
 # The PUMA 560 in standard DH, SI units, as in P. Corke's Robotics Toolbox (`Puma560`), whose values come from
@@ -342,7 +343,7 @@ _PUMA = (
 
 
 def puma560(rotor_inertia: bool = False, viscous: bool = False, coulomb: bool = False, smooth_coulomb: bool = False,
-            offset: bool = False, smooth_coulomb_velocity: Any = SMOOTH_VELOCITY) -> SymbolicArm:
+            offset: bool = False, smooth_coulomb_velocity: Any = SMOOTH_VELOCITY, *, derive: bool = True) -> SymbolicArm:
     """The Unimation PUMA 560 (standard DH; sources in the comment above `_PUMA`), gravity 9.81 m/s² along −z.
 
     φ: the 60 standard parameters of the six links, then with `rotor_inertia` the reflected motor inertias J_m G²
@@ -361,4 +362,5 @@ def puma560(rotor_inertia: bool = False, viscous: bool = False, coulomb: bool = 
                        "standard", (0.0, 0.0, -9.81), Jm * G**2 if rotor_inertia else None,
                        B * G**2 if viscous else None, np.abs(G) * (Tc[:, 0] - Tc[:, 1]) / 2 if coulomb else None,
                        np.radians(limits), np.zeros(6) if smooth_coulomb else None,
-                       np.abs(G) * (Tc[:, 0] + Tc[:, 1]) / 2 if offset else None, smooth_coulomb_velocity)
+                       np.abs(G) * (Tc[:, 0] + Tc[:, 1]) / 2 if offset else None, smooth_coulomb_velocity,
+                       derive=derive)
