@@ -56,6 +56,8 @@ ESTIMATES = ("consistent", "wls", "ols")
 AUTO = "auto"
 FILTER_ORDER = 4  # a zero-phase filter of order N passes f as 1/(1 + (f/f_c)^{2N}): 1/257 at 2 f_c
 EDGE_TIME_CONSTANTS = 3.0  # the default trim: 3/cutoff s at each end, where the zero-phase filter has not settled
+EDGE_SHARE = 0.25  # ... at most this share of the fit part at each end: the parallel filter is exact at its edges (W and
+# τ filtered alike), so a low cutoff on a short log trims only the light pre-filter's settling, not the log
 ENERGY_FRACTION = 0.99  # the excitation's band from the data: below it lies this share of q's spectral energy
 CUTOFF_FACTOR = 5.0  # the default cutoff: this many times the excitation's band (W holds products of its harmonics)
 DECIMATED_RATE = 2.5  # the default decimation keeps a sample rate of 2.5 × the cutoff (cutoff = 0.8 × new Nyquist)
@@ -200,7 +202,8 @@ class Preprocessing:
             decimate_source = "auto"
         else:
             decimate, decimate_source = int(self.decimate), "option"
-        trim = float(self.trim) if self.trim is not None else 0.0 if cutoff is None else EDGE_TIME_CONSTANTS / cutoff
+        trim = float(self.trim) if self.trim is not None else 0.0 if cutoff is None else min(
+            EDGE_TIME_CONSTANTS / cutoff, EDGE_SHARE * float(data.t[-1] - data.t[0]))  # a short log keeps its middle
         return Settings(cutoff, source, band, band_source, rate, self.window, self.polyorder, trim, decimate,
                         decimate_source)
 
