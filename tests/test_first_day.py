@@ -176,3 +176,11 @@ def test_compare_variants_side_by_side_equal_their_own_runs(tmp_path: Path, caps
         alone = metrics(load("example-6.3.1", ["simulation.t_final=0.5", *extra]).run())
         assert row["rms_error_norm"] == pytest.approx(alone["rms_error_norm"], rel=1e-12)
     assert main(["compare", "example-6.3.1", "--variant", "controller.Kv=20", "--fair", "--max-torque", "100"]) == 2
+
+
+def test_list_marks_the_extras_a_scenario_needs(capsys: pytest.CaptureFixture) -> None:
+    assert main(["list"]) == 0
+    lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()}
+    assert lines["panda-slotine-li"].endswith("[needs: urdf]")
+    assert lines["panda-mujoco"].endswith("[needs: urdf, mujoco]")
+    assert "[needs" not in lines["example-6.3.1"]

@@ -94,6 +94,25 @@ def available() -> dict[str, str]:
     return out
 
 
+def extras(data: dict[str, Any]) -> list[str]:
+    """The optional extras a scenario's data need (`pip install 'robotadapt[...]'`): `urdf` for a robot read from a
+    URDF or example-robot-data (Pinocchio's parser), `mujoco` for MuJoCo as the plant, `symbolic` for a sympy model."""
+    robot, plant = data.get("robot", {}), data.get("plant", {})
+    need = []
+    if robot.get("kind") in ("urdf", "example_robot"):
+        need.append("urdf")
+    if robot.get("model") == "sympy":
+        need.append("symbolic")
+    if isinstance(plant, dict) and plant.get("engine") == "mujoco":
+        need.append("mujoco")
+    return need
+
+
+def needs() -> dict[str, list[str]]:
+    """Packaged scenario names → the extras each needs (none: the core)."""
+    return {name: extras(tomllib.loads(path.read_text(encoding="utf-8"))) for name, path in sorted(_packaged().items())}
+
+
 def book_scenarios() -> list[str]:
     """The packaged scenarios named example-* and problem-*, in order."""
     return [name for name in available() if name.startswith(("example-", "problem-"))]
