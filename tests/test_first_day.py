@@ -184,3 +184,9 @@ def test_list_marks_the_extras_a_scenario_needs(capsys: pytest.CaptureFixture) -
     assert lines["panda-slotine-li"].endswith("[needs: urdf]")
     assert lines["panda-mujoco"].endswith("[needs: urdf, mujoco]")
     assert "[needs" not in lines["example-6.3.1"]
+
+
+def test_the_summary_of_a_law_without_an_estimate_says_so(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["run", "example-7.2.2", "--t-final", "0.2", "--no-plots", "--out", str(tmp_path)]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    assert line.endswith("no parameter estimate") and "= []" not in line

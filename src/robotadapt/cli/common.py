@@ -95,6 +95,8 @@ def _summary(name: str, m: dict[str, Any]) -> str:
             return (f"{head}, final ‖K(φ − φ̂)‖/‖Kφ‖ = {m['final_base_phi_error_relative']:.3g} over "
                     f"{m['base_parameters']} base parameters, {hidden}")
         return f"{head}, {m['base_parameters']} base parameters estimated, {hidden}"
+    if not names:  # a law without a parameter estimate (the repetitive law learns the feedforward instead)
+        return f"{head}, no parameter estimate"
     if len(names) <= MAX_SUMMARY_PARAMETERS:
         return f"{head}, final {', '.join(names)} = {fmt(m['final_phi_hat'])}"
     if "final_phi_error" in m:
