@@ -41,15 +41,8 @@ _UNIT[np.arange(10), _ROWS, _COLS] = 1.0
 _LOWER_HALF = np.tril(np.ones((4, 4)), -1) + 0.5 * np.eye(4)  # Φ(S): the part of S below the diagonal and half of it
 
 
-@dataclass(frozen=True, eq=False)
-class Euclidean(Module):
-    """The book's update dφ̂/dt = Γ b with state x = φ̂; V_φ = ½ φ̃ᵀ Γ⁻¹ φ̃ (6.3.7)."""
-
-    Gamma: Array
-
-    @derived
-    def _Gamma_inv(self) -> Array:
-        return None if self.Gamma is None else array_namespace(self.Gamma).linalg.inv(self.Gamma)  # Frozen: none
+class Direct(Module):
+    """A geometry whose state is φ̂ itself (x = φ̂), stepped x + h·dx: the Euclidean and the pullback law."""
 
     def state_names(self, param_names: tuple[str, ...]) -> tuple[str, ...]:
         return tuple(f"{name}_hat" for name in param_names)
@@ -60,14 +53,26 @@ class Euclidean(Module):
     def estimate(self, x: Array) -> Array:
         return x
 
+    def step(self, x: Array, dx: Array, h: Any) -> Array:
+        return x + h * dx
+
+
+@dataclass(frozen=True, eq=False)
+class Euclidean(Direct):
+    """The book's update dφ̂/dt = Γ b with state x = φ̂; V_φ = ½ φ̃ᵀ Γ⁻¹ φ̃ (6.3.7)."""
+
+    Gamma: Array
+
+    @derived
+    def _Gamma_inv(self) -> Array:
+        return None if self.Gamma is None else array_namespace(self.Gamma).linalg.inv(self.Gamma)  # Frozen: none
+
+
     def rate(self, x: Array, b: Array) -> Array:
         return matvec(self.Gamma, b)  # Γ may carry a runs axis (a batch of gains)
 
     def lyapunov(self, x: Array, phi: Array) -> Array:
         return 0.5 * quad(phi - x, self._Gamma_inv)
-
-    def step(self, x: Array, dx: Array, h: Any) -> Array:
-        return x + h * dx
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,7 +204,7 @@ class Natural(_Parts):
 
 
 @dataclass(frozen=True, eq=False)
-class Pullback(_Parts):
+class Pullback(Direct, _Parts):
     """The constant pullback metric of Lee, Kwon & Park (2018): the natural law's metric frozen at a reference φ₀
     (`phi_ref`, every part physically consistent: P₀ᵢ = J(φ₀ᵢ) ≻ 0 per link, θ₀ > 0 per scalar), state x = φ̂:
 
@@ -232,14 +237,6 @@ class Pullback(_Parts):
         P0 = pseudo_inertia(links)
         return P0, array_namespace(P0).linalg.inv(P0), scalars
 
-    def state_names(self, param_names: tuple[str, ...]) -> tuple[str, ...]:
-        return tuple(f"{name}_hat" for name in param_names)
-
-    def initial_state(self, phi_hat0: Array) -> Array:
-        return np.array(phi_hat0, dtype=float)
-
-    def estimate(self, x: Array) -> Array:
-        return x
 
     def rate(self, x: Array, b: Array) -> Array:
         """dφ̂/dt: φ(P₀ B P₀ / γ) per link, θ₀² b / γ per scalar (linear in b; x does not enter)."""
@@ -258,9 +255,6 @@ class Pullback(_Parts):
         links = (A * xp.swapaxes(A, -1, -2)).sum(axis=(-2, -1))  # tr(A A)
         scalars = error_scalars * error_scalars / (theta0 * theta0)
         return 0.5 * self.gamma * (links.sum(axis=-1) + scalars.sum(axis=-1))
-
-    def step(self, x: Array, dx: Array, h: Any) -> Array:
-        return x + h * dx
 
 
 def pullback_reference(adaptation: str, phi_ref: Any, phi_hat0: Array, param_names: tuple[str, ...]) -> Any:
