@@ -14,12 +14,12 @@ $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
 
-$(VENV)/.core: $(BIN)/python pyproject.toml
-	$(PIP) install --quiet -e .
+$(VENV)/.core: $(BIN)/python pyproject.toml   # every extra the README and the guides use ([all]), so none asks later
+	$(PIP) install --quiet -e ".[all]"
 	touch $@
 
 $(VENV)/.dev: $(BIN)/python pyproject.toml
-	$(PIP) install --quiet -e ".[dev,symbolic,urdf,dist,jax,mujoco,identify]"
+	$(PIP) install --quiet -e ".[dev,all]"
 	touch $@
 
 demo: $(VENV)/.core                ## set up and run the flagship example (Example 6.3.1) into results/

@@ -190,3 +190,37 @@ def test_the_summary_of_a_law_without_an_estimate_says_so(tmp_path: Path, capsys
     assert main(["run", "example-7.2.2", "--t-final", "0.2", "--no-plots", "--out", str(tmp_path)]) == 0
     line = capsys.readouterr().out.splitlines()[0]
     assert line.endswith("no parameter estimate") and "= []" not in line
+
+
+def test_the_first_command_installs_every_extra_a_command_asks_for():
+    """Item 1: after `make demo`, no command of the README or the guides asks for an install. Every extra that the
+    package names in its messages (`robotadapt[X]`) is in `[all]`, and the target `make demo` depends on installs
+    `[all]`."""
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    everything = project["optional-dependencies"]["all"]
+    assert len(everything) == 1 and everything[0].startswith("robotadapt[")
+    included = set(everything[0][len("robotadapt["):-1].split(","))
+    named = set()
+    for path in (ROOT / "src").rglob("*.py"):
+        named |= set(re.findall(r"robotadapt\[([a-z]+)\]", path.read_text()))
+    assert named - {"jax"} <= included, named - included
+    assert included <= set(project["optional-dependencies"]) - {"all", "dev"}
+    makefile = (ROOT / "Makefile").read_text()
+    prerequisite = re.search(r"^demo: (\S+)", makefile, flags=re.MULTILINE)
+    assert prerequisite
+    recipe = re.search(rf"^{re.escape(prerequisite.group(1))}:.*\n\t(.*)\n", makefile, flags=re.MULTILINE)
+    assert recipe and '-e ".[all]"' in recipe.group(1)
+
+
+def test_identify_without_cvxpy_says_so_before_any_work(monkeypatch, capsys, tmp_path):
+    """Item 1: a missing extra is found before the data is read (the log here does not even exist)."""
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "cvxpy" else real(name, *a))
+    code = main(["identify", str(tmp_path / "absent.csv"), "--robot", "example-6.3.1", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert "--estimate" in err[0] and "robotadapt[identify]" in err[0] and "absent" not in err[0]

@@ -14,6 +14,7 @@ import pytest
 from robotadapt.analysis.identification import (
     CUTOFF_FACTOR,
     DECIMATED_RATE,
+    ROWS_PER_PARAMETER,
     Preprocessing,
     excitation_band,
     identify,
@@ -103,6 +104,13 @@ def test_the_default_cutoff_and_decimation_come_from_the_excitation():
     assert Preprocessing(cutoff=7.0, decimate=3).resolve(data).decimate == 3
     assert Preprocessing(cutoff=None).resolve(data).decimate == 1
     assert excitation_band(np.zeros((100, 2)), 0.01) is None
+    # a short log is not thinned below ROWS_PER_PARAMETER equations per base parameter (3 s of the Panda's 100 Hz log
+    # kept 4 samples for 43 parameters): the cap binds, and it keeps that many rows after the trim
+    short = JointData(t[:600], q[:600], None, 0 * q[:600], "short")
+    free, capped = Preprocessing().resolve(short), Preprocessing().resolve(short, parameters=20)
+    kept = np.count_nonzero((short.t >= short.t[0] + capped.trim) & (short.t <= short.t[-1] - capped.trim))
+    assert capped.decimate < free.decimate and capped.decimate == kept * 2 // (ROWS_PER_PARAMETER * 20)
+    assert Preprocessing().resolve(data, parameters=2).decimate == s.decimate  # a long log: the cap does not bind
 
 
 def test_a_log_without_velocities_needs_the_low_pass():

@@ -11,11 +11,12 @@ import shlex
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
-from doc_pages import blocks
+from doc_pages import blocks, run_page
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -93,3 +94,55 @@ def test_a_newcomer_follows_the_readme_verbatim_on_a_new_venv(tmp_path):
     assert done.returncode == 0, done.stdout + done.stderr
     assert (repo / "results/example-6.3.1/tracking_error.png").exists()
     check(newcomer(repo, repo / ".venv/bin"), repo)
+    timings = first_day(repo, repo / ".venv/bin", tmp_path / "day")
+    print("the newcomer's day, wall time (s):", {k: round(v, 1) for k, v in timings.items()})
+
+
+NO_PLANT = """description = "my 3-link planar arm, its own parameters: no [plant] section"
+[robot]
+kind = "planar"
+n_links = 3
+lengths = [0.5, 0.4, 0.3]
+masses = [3.0, 2.0, 1.0]
+[trajectory]
+kind = "sinusoid"
+[controller]
+kind = "slotine_li"
+Lam = 5.0
+Kv = 20.0
+Gamma = 5.0
+[simulation]
+t_final = 2.0
+"""
+
+
+def first_day(repo: Path, bin_dir: Path, folder: Path) -> dict[str, float]:
+    """The rest of a control engineer's first day (issue 43) after `make demo`, with nothing installed since: the own
+    arm from Python (docs/own-arm.md as written) and from a file without `[plant]`, the Panda, identification from the
+    Panda's log, a comparison and variants side by side. Each step must succeed; returns each step's wall time."""
+    folder.mkdir()
+    (folder / "no-plant.toml").write_text(NO_PLANT)
+    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}", "VIRTUAL_ENV": str(bin_dir.parent),
+           "MPLBACKEND": "Agg"}
+    steps = {
+        "own arm, file without [plant]": "robotadapt run no-plant.toml --out own",
+        "the Panda": "robotadapt run panda-slotine-li --t-final 3 --out panda",
+        "identify": "robotadapt identify panda/result.npz --robot panda-slotine-li --out ident",
+        "compare": "robotadapt compare example-6.3.1 --t-final 2 --out cmp",
+        "variants": "robotadapt compare problem-6.3-1 --t-final 2 --out var --variant 'controller.Gamma=5' "
+                    "--variant 'controller.Gamma=50'",
+    }
+    timings = {}
+    start = time.perf_counter()
+    page = folder / "own-arm"
+    page.mkdir()
+    run_page(repo / "docs" / "own-arm.md", page, timeout=1800, python=bin_dir / "python")
+    timings["own arm, docs/own-arm.md"] = time.perf_counter() - start
+    for name, line in steps.items():
+        start = time.perf_counter()
+        done = subprocess.run(["sh", "-c", line], cwd=folder, env=env, capture_output=True, text=True, timeout=1800)
+        timings[name] = time.perf_counter() - start
+        assert done.returncode == 0, f"{name}: {line}\n{done.stdout}\n{done.stderr}"
+        assert "pip install" not in done.stdout + done.stderr, (name, done.stderr)
+    assert (folder / "ident" / "identified.json").exists() and (folder / "cmp" / "comparison.json").exists()
+    return timings

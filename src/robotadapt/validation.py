@@ -5,6 +5,7 @@ Every error the library raises on bad input is a :class:`ConfigError`; the CLI p
 
 from __future__ import annotations
 
+import importlib.util
 from collections.abc import Sequence
 from typing import Any
 
@@ -133,3 +134,12 @@ def check_switch(value: Any, field: str) -> None:
     """Raise unless `value` is a bool (a TOML true/false)."""
     if not isinstance(value, bool | np.bool_):
         raise ConfigError(field, f"expected true or false, got {value!r}")
+
+
+def require_extra(module: str, extra: str, field: str, what: str, otherwise: str = "") -> None:
+    """Stop before any work when `module` (of the extra `extra`) is missing: one line naming `field`, the install and
+    `otherwise`, the way around it."""
+    if importlib.util.find_spec(module) is None:
+        around = f", or {otherwise}" if otherwise else ""
+        raise ConfigError(field, f"{what} needs {module}: pip install 'robotadapt[{extra}]' (`make demo` installs every "
+                                 f"extra){around}")

@@ -45,7 +45,7 @@ import numpy as np
 
 from ..robots.consistency import BASIS, Part, parts
 from ..robots.identifiability import BaseParameters
-from ..validation import ConfigError
+from ..validation import ConfigError, require_extra
 
 Array = np.ndarray
 PRIOR_WEIGHT = 1e-6  # w: the pull toward φ₀ that fixes the directions no data and no divergence see
@@ -223,11 +223,8 @@ def consistent_estimate(basis: BaseParameters, W: Array, tau: Array, sigma: Arra
     against the divergence), `prior` φ₀, γ = `divergence_weight` (0: the bound and the weak pull only, the estimate
     before the divergence), w = `prior_weight`. Returns φ and the solver's status: "optimal", or "optimal_inaccurate"
     when Clarabel stopped short of its tolerances (the caller says so)."""
-    try:
-        import cvxpy as cp
-    except ModuleNotFoundError:
-        raise ConfigError("--estimate", "the physically consistent estimate needs cvxpy: pip install "
-                          "'robotadapt[identify]', or choose --estimate wls") from None
+    require_extra("cvxpy", "identify", "--estimate", "the physically consistent estimate", "choose --estimate wls")
+    import cvxpy as cp
     if not (np.isfinite(divergence_weight) and divergence_weight >= 0):
         raise ConfigError("--divergence-weight", f"expected a number ≥ 0, got {divergence_weight!r}")
     names = basis.model.param_names

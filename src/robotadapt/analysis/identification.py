@@ -61,6 +61,7 @@ EDGE_SHARE = 0.25  # ... at most this share of the fit part at each end: the par
 ENERGY_FRACTION = 0.99  # the excitation's band from the data: below it lies this share of q's spectral energy
 CUTOFF_FACTOR = 5.0  # the default cutoff: this many times the excitation's band (W holds products of its harmonics)
 DECIMATED_RATE = 2.5  # the default decimation keeps a sample rate of 2.5 × the cutoff (cutoff = 0.8 × new Nyquist)
+ROWS_PER_PARAMETER = 10  # ... but keeps at least 10 equations per base parameter: a short log is not thinned away
 DERIVATIVE_CUTOFF_FACTOR = 2.0  # q (and a logged q̇) low-passed at 2 × the cutoff before differentiation (10 × the band)
 HAC_CUTOFF_PERIODS = 3.0  # Newey–West lags: the samples of 3 periods of the cutoff, where the filter's correlation dies
 
@@ -180,10 +181,11 @@ class Preprocessing:
         if self.trim is not None:
             as_scalar(self.trim, "--trim", nonnegative=True)
 
-    def resolve(self, data: JointData) -> Settings:
+    def resolve(self, data: JointData, parameters: int = 0) -> Settings:
         """The cutoff, trim and decimation for `data` (the fit part of a log): "auto" cutoff = :data:`CUTOFF_FACTOR` ×
         the band (`band` if given, else :func:`excitation_band` of q), at most a quarter of the sample rate; "auto"
-        decimation D = ⌊rate / (:data:`DECIMATED_RATE` × cutoff)⌋ (1 without a cutoff)."""
+        decimation D = ⌊rate / (:data:`DECIMATED_RATE` × cutoff)⌋ (1 without a cutoff), at most what keeps
+        :data:`ROWS_PER_PARAMETER` equations per base parameter (`parameters` of them) after the trim."""
         rate = 1.0 / data.dt
         band, band_source = None, ""
         if self.cutoff == AUTO:
@@ -204,6 +206,9 @@ class Preprocessing:
             decimate, decimate_source = int(self.decimate), "option"
         trim = float(self.trim) if self.trim is not None else 0.0 if cutoff is None else min(
             EDGE_TIME_CONSTANTS / cutoff, EDGE_SHARE * float(data.t[-1] - data.t[0]))  # a short log keeps its middle
+        if decimate_source == "auto" and parameters:
+            kept = int(np.count_nonzero((data.t >= data.t[0] + trim) & (data.t <= data.t[-1] - trim)))
+            decimate = max(1, min(decimate, kept * data.n // (ROWS_PER_PARAMETER * parameters)))
         return Settings(cutoff, source, band, band_source, rate, self.window, self.polyorder, trim, decimate,
                         decimate_source)
 
@@ -444,7 +449,7 @@ def identify(model: RobotModel, data: JointData, pre: Preprocessing | None = Non
     fit_raw, held_raw = split(data, holdout)
     if fit_raw.t.size * model.n < 2 * b or fit_raw.t.size < 2:
         raise _too_few(data.source, fit_raw.t.size, model.n, b)
-    settings = pre.resolve(fit_raw)
+    settings = pre.resolve(fit_raw, b)
     warnings = [w for w in (no_cutoff_warning(data, settings),) if w]
     fit = samples(basis, fit_raw, settings)
     W, tau = fit.W, fit.tau

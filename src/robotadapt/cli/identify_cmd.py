@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..validation import ConfigError
+from ..validation import ConfigError, require_extra
 from .common import add_figure_arguments, figure_format, fmt
 
 
@@ -75,6 +75,8 @@ def main(args: argparse.Namespace) -> int:
     from ..studies.scenarios import load
 
     output = figure_format(args)
+    if args.estimate == "consistent":  # found before any work, not after the filtering
+        require_extra("cvxpy", "identify", "--estimate", "the physically consistent estimate", "choose --estimate wls")
     pre = Preprocessing(_cutoff(args.cutoff), args.window, args.polyorder, args.trim, _decimate(args.decimate))
     scenario = load(args.robot, list(args.set))
     model = scenario.setup.controller.model
