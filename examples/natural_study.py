@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from robotadapt.analysis.metrics import metrics
+from robotadapt.report.figures import rounds_figure
+from robotadapt.report.output import save_figure
 from robotadapt.studies.scenarios import load
 
 METHODS = {"no adaptation": "panda-natural-fixed", "Euclidean (Γ)": "panda-natural-euclidean",
@@ -65,22 +67,10 @@ def table(rows: dict[str, dict], rounds: int) -> str:
 
 
 def figure(rows: dict[str, dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 3.6))
-    for label, row in rows.items():
-        ax.semilogy(np.arange(1, len(row["round_rms_deg"]) + 1), row["round_rms_deg"], "o-", label=label)
-    ax.set_xlabel("round (5 s each)")
-    ax.set_ylabel("mean RMS tracking error (deg)")
-    ax.set_title("Panda, 2 kg payload, 1 kHz: adaptation from the payload-free estimate")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=150)
-    plt.close(fig)
+    fig = rounds_figure({label: row["round_rms_deg"] for label, row in rows.items()},
+                        "Panda, 2 kg payload, 1 kHz: adaptation from the payload-free estimate",
+                        "mean RMS tracking error (deg)", "round (5 s each)")
+    save_figure(fig, path)
 
 
 def main() -> None:

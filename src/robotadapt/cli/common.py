@@ -1,8 +1,9 @@
-"""Pieces several commands share: scenario arguments, figure arguments and the one-line run summary."""
+"""Pieces several commands share: scenario arguments, figure arguments and the run summary."""
 
 from __future__ import annotations
 
 import argparse
+import textwrap
 from typing import Any
 
 from ..report.output import DEFAULT_DPI, FORMATS, FigureFormat
@@ -65,40 +66,68 @@ def fmt(values: list[float]) -> str:
 
 #: above this many parameters the summary gives the parameter error instead of every estimate
 MAX_SUMMARY_PARAMETERS = 6
+#: the summary's lines wrap at this many characters
+SUMMARY_WIDTH = 100
 
 
-def summary(name: str, m: dict[str, Any]) -> str:
-    """One line: status, final and RMS error, final estimate (its error ‖φ̃‖ for many parameters; for a model with
-    unidentifiable directions, the base-parameter error ‖K φ̃‖/‖K φ‖ and how many directions the dynamics cannot see)."""
+def summary(name: str, m: dict[str, Any], model: Any = None) -> str:
+    """The run's summary, a line per quantity, every number with its unit, lines wrapped at `SUMMARY_WIDTH`: status and
+    final time; final |e|, RMS e and max |τ| per joint (rad or m, N·m or N by the joint types of the controller's
+    `model`; "rad or m" without it); the final estimate (its error ‖φ̃‖ for many parameters; for a model with
+    unidentifiable directions, the base-parameter error ‖K φ̃‖/‖K φ‖ and how many directions the dynamics cannot see);
+    where the estimate left the physically consistent set; the warnings of :func:`health_warnings`."""
     from ..analysis.metrics import health_warnings
+    from ..report.figures import EFFORT, POSITION, joint_types, parameter_units
 
-    line = _summary(name, m) + _left(m)
-    return "; ".join([line, *(f"warning: {w}" for w in health_warnings(m))])
+    joints = joint_types(model) if model is not None else None
+    lines = [f"final |e| = {_with_units(m['final_abs_error'], POSITION, joints)}",
+             f"RMS e     = {_with_units(m['rms_error'], POSITION, joints)}",
+             f"max |τ|   = {_with_units(m['max_abs_torque'], EFFORT, joints)}",
+             _estimate(m, parameter_units(model, m["param_names"])), *_left(m),
+             *(f"warning: {w}" for w in health_warnings(m))]
+    indent = name[: len(name) - len(name.lstrip())] + "  "  # a study's variant, "  Kv = 20", indents its lines
+    head = f"{name}: {m['status']}; t = {m['t_end']:.4g} s"
+    return "\n".join([_wrap(head, ""), *(_wrap(line, indent) for line in lines)])
 
 
-def _left(m: dict[str, Any]) -> str:
+def _wrap(line: str, indent: str) -> str:
+    """`line` after `indent`, wrapped at `SUMMARY_WIDTH` with a hanging indent, never inside a number (1e-05)."""
+    return textwrap.fill(line, SUMMARY_WIDTH, initial_indent=indent, subsequent_indent=indent + "    ",
+                         break_on_hyphens=False, break_long_words=False)
+
+
+def _with_units(values: list[float], units: dict[str, str], joints: str | None) -> str:
+    """`[0.01, 0.02] rad` (the unit of each joint type in `units`), or a unit each for mixed joint types."""
+    kinds = joints if joints is not None and len(joints) == len(values) else "?" * len(values)
+    if len(set(kinds)) == 1:
+        return f"{fmt(values)} {units[kinds[0]]}"
+    return "[" + ", ".join(f"{v:.4g} {units[kind]}" for v, kind in zip(values, kinds, strict=True)) + "]"
+
+
+def _left(m: dict[str, Any]) -> list[str]:
     """Where an arm's link estimates left the physically consistent set (docs/natural.md), when they did."""
     if m.get("left_consistent_set_t") is None or not any(p.startswith("link") for p in m.get("consistency_parts", ())):
-        return ""
-    return (f", the estimate left the physically consistent set at t = {m['left_consistent_set_t']:.4g} s "
+        return []
+    return [f"the estimate left the physically consistent set at t = {m['left_consistent_set_t']:.4g} s "
             f"({m['left_consistent_set_part']}; smallest pseudo-inertia eigenvalue "
-            f"{m['min_pseudo_inertia_eigenvalue']:.3g})")
+            f"{m['min_pseudo_inertia_eigenvalue']:.3g})"]
 
 
-def _summary(name: str, m: dict[str, Any]) -> str:
-    head = (f"{name}: {m['status']}; t = {m['t_end']:.4g} s, final |e| = {fmt(m['final_abs_error'])}, "
-            f"RMS e = {fmt(m['rms_error'])}")
+def _estimate(m: dict[str, Any], units: list[str | None]) -> str:
+    """The final estimate, each with its unit; its error, or the base parameters', when there are many."""
     names = m["param_names"]
     if "unidentifiable_directions" in m:  # an n-DOF arm: what the dynamics can see, the base parameters
         hidden = f"{m['unidentifiable_directions']} of {len(names)} directions unidentifiable"
         if m.get("final_base_phi_error_relative") is not None:
-            return (f"{head}, final ‖K(φ − φ̂)‖/‖Kφ‖ = {m['final_base_phi_error_relative']:.3g} over "
+            return (f"final ‖K(φ − φ̂)‖/‖Kφ‖ = {m['final_base_phi_error_relative']:.3g} over "
                     f"{m['base_parameters']} base parameters, {hidden}")
-        return f"{head}, {m['base_parameters']} base parameters estimated, {hidden}"
+        return f"{m['base_parameters']} base parameters estimated, {hidden}"
     if not names:  # a law without a parameter estimate (the repetitive law learns the feedforward instead)
-        return f"{head}, no parameter estimate"
+        return "no parameter estimate"
     if len(names) <= MAX_SUMMARY_PARAMETERS:
-        return f"{head}, final {', '.join(names)} = {fmt(m['final_phi_hat'])}"
+        return "final " + ", ".join(f"{name} = {value:.4g}" + (f" {unit}" if unit else "")
+                                    for name, value, unit in zip(names, m["final_phi_hat"], units, strict=True))
     if "final_phi_error" in m:
-        return f"{head}, final ‖φ − φ̂‖ = {m['final_phi_error']:.4g} over {len(names)} parameters"
-    return f"{head}, {len(names)} parameters estimated"
+        unit = units[0] if len(set(units)) == 1 and units[0] else "(mixed units)"
+        return f"final ‖φ − φ̂‖ = {m['final_phi_error']:.4g} {unit} over {len(names)} parameters"
+    return f"{len(names)} parameters estimated"

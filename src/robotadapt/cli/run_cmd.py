@@ -34,9 +34,10 @@ def _study(scenario: Any, out: Path, figures: FigureFormat | None) -> None:
     from ..studies.study import summary as study_summary
 
     runs = run_study(scenario, progress=True)
+    model = scenario.setup.controller.model
     for group in runs.values():
         for run in group:
-            print(summary(f"  {run.key} = {run.value}", metrics(run.result, scenario.setup.controller.model)))
+            print(summary(f"  {run.key} = {run.value}", metrics(run.result, model), model))
     atomic_write(out / "study.json", lambda f: json.dump(study_summary(runs), f, indent=2))
     if figures is not None:
         from ..report.figures import study
@@ -70,7 +71,7 @@ def main(args: argparse.Namespace) -> int:
 
             option_estimates(result, scenario.setup.plant, model, out / output.name("mujoco_options"), scenario.name,
                              output)
-    print(summary(scenario.name, metrics(result, model)))
+    print(summary(scenario.name, metrics(result, model), model))
     if args.video:
         from ..report.video import save_video
         from ..studies.scenarios.build import mujoco_view

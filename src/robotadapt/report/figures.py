@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import matplotlib
+import matplotlib.ticker
 import numpy as np
 
 from ..files import writable_dir
@@ -385,3 +386,24 @@ def study(key: str, runs: list[Any], path: Path, title: str = "", model: Any = N
           output: FigureFormat = PNG) -> Path:
     """Write :func:`study_figure` to `path` in `output`'s format."""
     return save_figure(study_figure(key, runs, title, model), path, output)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# a value per round of a repeated trajectory
+
+
+def rounds_figure(values: dict[str, Sequence[float]], title: str, ylabel: str, xlabel: str = "round") -> Figure:
+    """A value per round (one repetition of a periodic trajectory: its RMS tracking error, say) for each method, rounds
+    numbered from 1 on a whole-number axis, the values on a log axis; the title wraps to stay inside the figure."""
+    fig = new_figure(figsize=(6, 3.8), dpi=DEFAULT_DPI, layout="constrained")
+    ax = fig.subplots()
+    for i, (label, ys) in enumerate(values.items()):
+        ax.semilogy(np.arange(1, len(ys) + 1), ys, label=label, color=style(i)["color"],
+                    linestyle=DASHES[i % len(DASHES)], marker=MARKERS[i % len(MARKERS)])
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True, min_n_ticks=1))
+    ax.set(xlabel=xlabel, ylabel=ylabel)
+    ax.set_title(title, wrap=True)
+    ax.grid(True, which="both", alpha=0.3)
+    if values:
+        ax.legend()
+    return fig

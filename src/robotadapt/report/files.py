@@ -16,11 +16,12 @@ from ..sim.result import SimulationResult
 
 def save_result(result: SimulationResult, directory: str | os.PathLike[str], scenario_text: str | None = None,
                 model: Any = None) -> Path:
-    """Write `result.npz`, `metrics.json` (:func:`robotadapt.analysis.metrics.metrics`, in base parameters too when the
-    controller's `model` is given and has unidentifiable directions) and, if given, `scenario.toml` into `directory`,
-    each atomically; returns the folder."""
+    """Write `result.npz` (the arrays of the run, and `x_names`, the name of each column of the controller's state
+    `x`), `metrics.json` (:func:`robotadapt.analysis.metrics.metrics`, in base parameters too when the controller's
+    `model` is given and has unidentifiable directions) and, if given, `scenario.toml` into `directory`, each
+    atomically; returns the folder."""
     out = writable_dir(directory)
-    arrays: dict[str, Any] = result.arrays()
+    arrays: dict[str, Any] = {**result.arrays(), "x_names": np.array(result.state_names, dtype=str)}
     atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
     atomic_write(out / "metrics.json", lambda f: json.dump(metrics(result, model), f, indent=2))
     if scenario_text is not None:

@@ -1,19 +1,23 @@
-"""The figure of a tuning (`robotadapt tune`, docs/tuning.md): the objective and the peak torque against the iteration,
-the tracking error ‖e(t)‖ and the peak joint torque max_i |τ_i(t)| before and after, and, when a surface was computed,
-the objective over a grid of two gains with the optimiser's path on it."""
+"""The figure of a tuning (`robotadapt tune`, docs/tuning.md), a 2 × 2 grid: the objective and the peak torque against
+the iteration, the tracking error ‖e(t)‖ and the peak joint torque max_i |τ_i(t)| before and after, and, when a surface
+was computed, the objective over a grid of two gains with the optimiser's path on it."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib.colors
 import matplotlib.ticker
 import numpy as np
 
 from ..studies.tune import Surface, Tuned
-from .output import PNG, FigureFormat, new_figure, save_figure
+from .figures import EFFORT, POSITION, joint_types, norm_unit
+from .output import DEFAULT_DPI, PNG, FigureFormat, new_figure, save_figure
 from .sweep_figures import GAIN_SYMBOLS
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def gain_label(field: str) -> str:
@@ -22,41 +26,58 @@ def gain_label(field: str) -> str:
     return f"${GAIN_SYMBOLS[last]}$" if last in GAIN_SYMBOLS else field
 
 
-def tune_figure(tuned: Tuned, path: Path, output: FigureFormat = PNG) -> None:
-    """Write `path` (in `output`'s format): objective and peak torque per iteration; ‖e(t)‖ and max_i |τ_i(t)| before
-    and after (the nominal plant); the objective surface over two gains with the path, when the tuning computed one."""
+def plural(count: int, noun: str) -> str:
+    """`count` and `noun`, in the plural unless one: "1 iteration", "3 iterations"."""
+    return f"{count} {noun}" + ("" if count == 1 else "s")
+
+
+def tuning_figure(tuned: Tuned) -> Figure:
+    """Objective and peak torque per iteration (across the top, or beside the objective surface over two gains with
+    the path when the tuning computed one); ‖e(t)‖ and max_i |τ_i(t)| before and after (the nominal plant) below: a
+    2 × 2 grid, with units from the controller's model (rad or m, N·m or N by joint type)."""
     surface = tuned.surface
-    panels = 4 if surface is not None else 3
-    fig = new_figure(figsize=(4.6 * panels, 4.0), layout="constrained")
-    axes = fig.subplots(1, panels)
+    joints = joint_types(tuned.scenario.setup.controller.model)
+    position, effort = norm_unit(POSITION, joints), norm_unit(EFFORT, joints)
+    fig = new_figure(figsize=(11, 8), dpi=DEFAULT_DPI, layout="constrained")
+    axes = fig.subplot_mosaic([["iterations", "surface" if surface is not None else "iterations"], ["e", "tau"]])
     its = tuned.search.iterations
-    ax = axes[0]
+    ax = axes["iterations"]
     ax.semilogy([it.objective for it in its], "o-", color="C0", label=tuned.objective.text)
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True, min_n_ticks=1))
+    ax.set_xlim(-0.5, max(len(its) - 0.5, 0.5))  # one iteration: a unit-wide axis, not ±0.05 around it
     ax.set_xlabel("iteration")
     ax.set_ylabel(f"objective: {tuned.objective.text}", color="C0")
-    ax.set_title(f"{len(its)} iterations, {tuned.search.runs} differentiated runs, {tuned.wall_time:.3g} s")
+    ax.set_title(f"{plural(len(its), 'iteration')}, {plural(tuned.search.runs, 'differentiated run')}, "
+                 f"{tuned.wall_time:.3g} s")
     if tuned.max_torque is not None:
         twin = ax.twinx()
         twin.plot([it.max_abs_torque for it in its], "s--", color="C3", ms=3)
         twin.axhline(tuned.max_torque, color="C3", lw=0.8, ls=":")
-        twin.set_ylabel("peak |τ| (N·m), budget dotted", color="C3")
+        twin.set_ylabel(f"peak |τ| ({effort}), budget dotted", color="C3")
     for label, score, style in (("before", tuned.before, "--"), ("after", tuned.after, "-")):
         res = score.result
-        axes[1].semilogy(res.t, np.linalg.norm(res.e, axis=-1), style, label=f"{label}: {score.objective:.4g}")
-        axes[2].plot(res.t, np.max(np.abs(res.tau), axis=-1), style, label=f"{label}: peak {score.max_abs_torque:.4g}")
+        axes["e"].semilogy(res.t, np.linalg.norm(res.e, axis=-1), style, label=f"{label}: {score.objective:.4g}")
+        axes["tau"].plot(res.t, np.max(np.abs(res.tau), axis=-1), style,
+                         label=f"{label}: peak {score.max_abs_torque:.4g} {effort}")
     top = max(float(np.max(np.linalg.norm(s.result.e, axis=-1))) for s in (tuned.before, tuned.after))
-    axes[1].set(xlabel="t (s)", ylabel="‖e(t)‖", title="tracking error (nominal plant)", ylim=(1e-8 * top, 2 * top))
-    axes[2].set(xlabel="t (s)", ylabel="max_i |τ_i(t)|", title="peak joint torque")
+    axes["e"].set(xlabel="time t (s)", ylabel=f"‖e(t)‖ ({position})", title="tracking error (nominal plant)",
+                  ylim=(1e-8 * top, 2 * top))
+    axes["tau"].set(xlabel="time t (s)", ylabel=f"max_i |τ_i(t)| ({effort})", title="peak joint torque")
     if tuned.max_torque is not None:
-        axes[2].axhline(tuned.max_torque, color="k", lw=0.8, ls=":", label=f"budget {tuned.max_torque:g}")
-    axes[1].legend(fontsize=8)
-    axes[2].legend(fontsize=8)
+        axes["tau"].axhline(tuned.max_torque, color="k", lw=0.8, ls=":", label=f"budget {tuned.max_torque:g} {effort}")
+    axes["e"].legend(fontsize=8)
+    axes["tau"].legend(fontsize=8)
     if surface is not None:
-        _surface(axes[3], tuned, surface)
+        _surface(axes["surface"], tuned, surface)
     fig.suptitle(f"robotadapt tune {tuned.scenario.name}: {tuned.objective.text}"
-                 + ("" if tuned.max_torque is None else f", max |τ| ≤ {tuned.max_torque:g}")
+                 + ("" if tuned.max_torque is None else f", max |τ| ≤ {tuned.max_torque:g} {effort}")
                  + ("" if tuned.feasible else " (budget NOT met)"))
-    save_figure(fig, path, output)
+    return fig
+
+
+def tune_figure(tuned: Tuned, path: Path, output: FigureFormat = PNG) -> Path:
+    """Write :func:`tuning_figure` to `path` in `output`'s format."""
+    return save_figure(tuning_figure(tuned), path, output)
 
 
 def _surface(ax: Any, tuned: Tuned, surface: Surface) -> None:

@@ -68,8 +68,33 @@ class Scenario:
     @property
     def text(self) -> str:
         """The resolved scenario as TOML (what a run saves as scenario.toml): every value the run used, the
-        constructors' defaults included, so that running the file again reproduces the run if a default changes."""
-        return tomli_w.dumps(self.setup.data or self.data)
+        constructors' defaults included, so that running the file again reproduces the run if a default changes.
+        An array is one line (a matrix too long for one: a line per row), its numbers written as Python's repr,
+        which reads back to the very same float."""
+
+        def key(k: str) -> str:
+            return tomli_w.dumps({k: 0}).rsplit(" = ", 1)[0]  # bare where it can be, else quoted
+
+        def value(v: Any) -> str:
+            if isinstance(v, list | tuple):
+                items = [value(x) for x in v]
+                line = "[" + ", ".join(items) + "]"
+                nested = any(isinstance(x, list | tuple) for x in v)
+                return "[\n" + "".join(f"    {item},\n" for item in items) + "]" if nested and len(line) > 100 else line
+            if isinstance(v, dict):
+                return "{" + ", ".join(f"{key(k)} = {value(x)}" for k, x in v.items()) + "}"
+            return toml_value(v)
+
+        def table(data: dict[str, Any], name: str) -> list[str]:
+            lines = [f"{key(k)} = {value(v)}" for k, v in data.items() if not isinstance(v, dict)]
+            subtables = [(k, v) for k, v in data.items() if isinstance(v, dict)]
+            if name and (lines or not subtables):
+                lines.insert(0, f"[{name}]")
+            for k, v in subtables:
+                lines += [""] * bool(lines) + table(v, f"{name}.{key(k)}" if name else key(k))
+            return lines
+
+        return "\n".join(table(self.setup.data or self.data, "")) + "\n"
 
     def run(self, progress: bool = False) -> Any:
         """Simulate this scenario; returns a :class:`~robotadapt.sim.result.SimulationResult`."""
