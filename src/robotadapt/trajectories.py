@@ -50,6 +50,8 @@ class SumOfSines(Module):
     `period` is 2π/ω for a single frequency and the common period of commensurate frequencies, else None.
     """
 
+    array_api: ClassVar[bool] = True  # its own code is array API: a compiled loop evaluates it
+
     per_run: ClassVar[tuple[str, ...]] = ("amplitude", "omega", "phase", "offset")  # varies per run in one vectorized batch
 
     amplitude: Array
@@ -168,6 +170,8 @@ def sinusoid(n: int, amplitude: Any = 1.0, omega: Any = 1.0, phase: Any = 0.0, o
 class ExponentialStep(Module):
     """q_des = start + (final − start)(1 − e^{−a t}): the book's non-exciting `1 − e^{−2t}` (Example 6.5.1)."""
 
+    array_api: ClassVar[bool] = True  # its own code is array API: a compiled loop evaluates it
+
     final: Array
     rate: Array
     start: Array
@@ -185,6 +189,8 @@ class ExponentialStep(Module):
 @dataclass(frozen=True, eq=False)
 class Quintic(Module):
     """Point-to-point quintic from `q0` at `t0` to `q1` at `t1`, zero velocity and acceleration at both ends; held after."""
+
+    array_api: ClassVar[bool] = True  # its own code is array API: a compiled loop evaluates it
 
     q0: Array
     q1: Array
@@ -213,6 +219,8 @@ class Quintic(Module):
 class Constant(Module):
     """A set point: q_des = value, q̇_des = q̈_des = 0."""
 
+    array_api: ClassVar[bool] = True  # its own code is array API: a compiled loop evaluates it
+
     value: Array
 
     n = property(lambda self: int(self.value.shape[-1]))
@@ -239,6 +247,7 @@ def constant(n: int, value: Any) -> Constant:
 
 
 def traceable(trajectory: Trajectory) -> bool:
-    """Whether `trajectory` is one of the trajectories here, written in the array API of `t`: a compiled program can
-    evaluate it itself (:class:`robotadapt.sim.loop.RK4Step`). A user's is sampled in Python and fed."""
-    return type(trajectory) in (SumOfSines, ExponentialStep, Quintic, Constant)
+    """Whether `trajectory` is one of the package's trajectories (here and in :mod:`robotadapt.task_trajectories`, each
+    declaring `array_api`), written in the array API of `t`: a compiled program can evaluate it itself
+    (:class:`robotadapt.sim.loop.RK4Step`). A user's is sampled in Python and fed."""
+    return bool(vars(type(trajectory)).get("array_api", False))  # declared by the class itself, not inherited

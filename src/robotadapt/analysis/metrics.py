@@ -192,5 +192,25 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
     from .monitors import monitor_metrics
 
     out.update(monitor_metrics(res, res.monitors))
+    out.update(task_metrics(res, out))
     out.update({k: v for k, v in (res.running or {}).items() if k in out})  # every step's, not the logged samples'
+    if res.space == "task":  # the hand's error in metres, under the names a task-space user looks for
+        out.update(task_rms_error=out["rms_error_norm"], task_final_error=out["final_error_norm"],
+                   task_max_error=out["max_error_norm"])
+    return out
+
+
+def task_metrics(res: SimulationResult, m: dict[str, Any]) -> dict[str, Any]:
+    """What a task-space law's run adds (docs/task-space.md): `error_space` "task" (its e is x_d − x, metres),
+    `max_error_norm` max ‖e‖, and for a law that estimates kinematic parameters (the adaptive Jacobian) their names,
+    `final_theta_hat` and `theta_true` (m). `task_rms_error`, `task_final_error` and `task_max_error` (m) are
+    `rms_error_norm`, `final_error_norm` and `max_error_norm` of every step (:func:`metrics`)."""
+    if res.space != "task":
+        return {}
+    out: dict[str, Any] = {"error_space": "task",
+                           "max_error_norm": float(np.max(np.linalg.norm(res.e, axis=-1)))}
+    if "theta_hat" in res.monitors:
+        out["kinematic_names"] = [name[len("theta_hat["):-1] for name in res.state_names if name.startswith("theta_hat[")]
+        out["final_theta_hat"] = _list(res.monitors["theta_hat"][-1])
+        out["theta_true"] = _list(res.monitors["theta_true"][-1])
     return out

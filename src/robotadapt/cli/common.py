@@ -80,10 +80,12 @@ def summary(name: str, m: dict[str, Any], model: Any = None) -> str:
     from ..report.figures import EFFORT, POSITION, joint_types, parameter_units
 
     joints = joint_types(model) if model is not None else None
-    lines = [f"final |e| = {_with_units(m['final_abs_error'], POSITION, joints)}",
-             f"RMS e     = {_with_units(m['rms_error'], POSITION, joints)}",
+    task = m.get("error_space") == "task"  # the hand's error x_d − x, in metres (docs/task-space.md)
+    errors = "P" * len(m["rms_error"]) if task else joints
+    lines = [f"final |e| = {_with_units(m['final_abs_error'], POSITION, errors)}" + (" (hand)" if task else ""),
+             f"RMS e     = {_with_units(m['rms_error'], POSITION, errors)}",
              f"max |τ|   = {_with_units(m['max_abs_torque'], EFFORT, joints)}",
-             _estimate(m, parameter_units(model, m["param_names"])), *_left(m),
+             _estimate(m, parameter_units(model, m["param_names"])), *_kinematics(m), *_left(m),
              *(f"warning: {w}" for w in health_warnings(m))]
     indent = name[: len(name) - len(name.lstrip())] + "  "  # a study's variant, "  Kv = 20", indents its lines
     head = f"{name}: {m['status']}; t = {m['t_end']:.4g} s"
@@ -102,6 +104,14 @@ def _with_units(values: list[float], units: dict[str, str], joints: str | None) 
     if len(set(kinds)) == 1:
         return f"{fmt(values)} {units[kinds[0]]}"
     return "[" + ", ".join(f"{v:.4g} {units[kind]}" for v, kind in zip(values, kinds, strict=True)) + "]"
+
+
+def _kinematics(m: dict[str, Any]) -> list[str]:
+    """The kinematic estimate of the adaptive Jacobian, with its truth (metres)."""
+    if "final_theta_hat" not in m:
+        return []
+    return ["final " + ", ".join(f"{name} = {value:.4g} m (true {truth:.4g})" for name, value, truth in
+                                 zip(m["kinematic_names"], m["final_theta_hat"], m["theta_true"], strict=True))]
 
 
 def _left(m: dict[str, Any]) -> list[str]:

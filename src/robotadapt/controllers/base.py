@@ -59,6 +59,7 @@ class Law(Registered, Module, ABC):
     `passivity_caveat`        why the gains may not imply the passivity claim        None
     `lyapunov_caveat`         why `lyapunov` is no Lyapunov function of the loop     None
     `monitors`                the law's own monitor series (λ_min(P⁻¹))             none
+    `tracking_error`          (e, ė) the metrics measure; `error_size` its length   q_des − q; n
     ========================  ====================================================  ===========================
 
     A law whose update reads the measured q̈ (Table 6.2.1) sets `needs_acceleration` and gives `torque` and `update`
@@ -78,6 +79,9 @@ class Law(Registered, Module, ABC):
     #: a baseline with a fixed φ̂: the comparison gives it the nominal model (the model's published values, else the
     #: true φ), not the adaptive laws' common φ̂(0)
     nominal: ClassVar[bool] = False
+    #: where its reference lives: "joint" (q_d) or "task" (the hand's x_d: docs/task-space.md); the comparison runs
+    #: the laws of the scenario's law's space
+    space: ClassVar[str] = "joint"
     #: the comparison's gain family: the laws of one family take from the scenario's law the gains that play the same
     #: part ("6": r = ė + Λe, chapter 6; "7.2": r = ė + e, §7.2); None: shares none
     family: ClassVar[str | None] = None
@@ -215,6 +219,16 @@ class Law(Registered, Module, ABC):
     def monitors(self, x: Array) -> dict[str, Array]:
         """The law's own monitor series at the logged states (the composite law's λ_min(P⁻¹), (6.6.27))."""
         return {}
+
+    @property
+    def error_size(self) -> int:
+        """The length of the tracking error the law drives to zero: n joints, or a task-space law's m coordinates."""
+        return self.model.n
+
+    def tracking_error(self, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
+        """(e, ė) the run's metrics measure: e = q_des − q by default; a task-space law's x_d − x(q) (its reference
+        holds x_d, ẋ_d, ẍ_d)."""
+        return errors(q, dq, ref)
 
 
 def as_law(controller: Any) -> Law:

@@ -37,6 +37,10 @@ generated code) gave an XLA program with 26,000 multiplies for Y alone (fusion c
 same loaded machine (benchmarks/bench_kinematic_tree.py). M by composite rigid bodies measured 2–3 times faster than
 from the regressor's acceleration slot (n passes with a = e_k).
 
+The hand frame (task space, :mod:`robotadapt.robots.hand`) comes from the same world poses and joint motions S̃_j:
+:meth:`KinematicTree.hand` (p, R, the geometric Jacobian and its rate) and the kinematic basis, one column per nonzero
+component of a placement translation (a vector fixed in a link, so ∂/∂q_l is u_l × ·).
+
 Every method takes leading batch axes and is written with the namespace of its inputs (no writes, no branching on
 values; small products switch between multiply-and-sum and matmul on the static batch size), so the same code runs in
 numpy and under `jax.jit`, `vmap` and `lax.scan` (float64 needs `jax_enable_x64`). The model's constants are numpy
@@ -58,6 +62,8 @@ from ..arrays import array_namespace
 from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
 from .base import Array, RobotModel
 from .dh import EXTRAS, LINK_KEYS, SIGNED, SMOOTH_VELOCITY, Geometry, SerialChain, joint_placements
+from .hand import Hand, hand_on, tool_names, tool_values
+from .hand import cross as _cross
 
 _MATMUL_ABOVE = 64  # leading size (states × links) above which small products use matmul (see `_many`)
 _PAIRS = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))  # I_xx, I_xy, I_yy, I_xz, I_yz, I_zz
@@ -66,12 +72,6 @@ _PIN_JOINTS: dict[str, tuple[str, tuple[float, ...] | None]] = {f"JointModel{p}{
                for p, k in (("R", "R"), ("RUB", "R"), ("P", "P")) for x in "XYZ"}
 _PIN_JOINTS |= {"JointModelRevoluteUnaligned": ("R", None), "JointModelRevoluteUnboundedUnaligned": ("R", None),
                 "JointModelPrismaticUnaligned": ("P", None)}
-
-
-def _cross(xp: Any, a: Array, b: Array) -> Array:
-    """a × b along the last axis, broadcasting."""
-    a0, a1, a2, b0, b1, b2 = a[..., 0], a[..., 1], a[..., 2], b[..., 0], b[..., 1], b[..., 2]
-    return xp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _concat(xp: Any, arrays: list[Array]) -> Array:
@@ -269,7 +269,7 @@ class KinematicTree(SerialChain, RobotModel):
             if k >= 0:
                 down[:, i] += down[:, k]
         const |= {"down": down, "up": down.T.copy(), "minus_g": -self.g, "eye": np.eye(n)}
-        set_(self, "_const", const)
+        set_(self, "_const", const | self._hand_constants(down))
         set_(self, "_chain", parents == tuple(range(-1, n - 1)))
 
     # -- construction -------------------------------------------------------------------------------------------------
@@ -421,6 +421,108 @@ class KinematicTree(SerialChain, RobotModel):
         """The chain's own parameters: `link_params` (URDF inertials or DH link data), then the extras' values."""
         xp = array_namespace(self.link_params)  # numpy; traced arrays when the compiled engine swaps the fields
         return xp.concat([xp.reshape(self.link_params, (-1,))] + [getattr(self, e) for e in self.extras])
+
+    # -- task space (robotadapt.robots.hand) ------------------------------------------------------------------------
+
+    def _hand_constants(self, down: Array) -> dict[str, Any]:
+        """What the hand needs, from the geometry: the joints that move the last link (the hand's path), the kinematic
+        parameters (a link index, n for the base; a unit vector in that link's axes; the joints that turn that link;
+        name and value), the tool's three rows last, and the task axes."""
+        n, last = self.n, self.n - 1
+        path = down[:, last]
+        rows: list[tuple[int, Array, str, float]] = []  # (link, vector in its axes, name, value)
+        for k in np.flatnonzero(path):
+            parent = self.parents[k] if self.parents[k] >= 0 else n
+            for c, axis in enumerate("xyz"):
+                if abs(self.translation[k, c]) > 1e-12:
+                    rows.append((parent, np.eye(3)[c], f"{self.joint_names[k]}.{axis}", self.translation[k, c]))
+                if abs(self.link_translation[k, c]) > 1e-12:
+                    rows.append((int(k), self.link_rotation[k, c], f"{self.joint_names[k]}.link.{axis}",
+                                 self.link_translation[k, c]))  # row c of L_R: Lᵣᵀ e_c
+        links = [r[0] for r in rows] + [last] * 3
+        moved = np.concatenate([down, np.zeros((n, 1))], axis=1)[:, links].T  # joint l moves the vector's link
+        planes = [a for a in (2, 1, 0) if self._moves_across(a, path)]
+        return {"hand_path": path, "kin_link": np.array(links, dtype=int),
+                "kin_vector": np.array([r[1] for r in rows] + list(np.eye(3))).reshape(-1, 3), "kin_moved": moved,
+                "kin_names": tuple(r[2] for r in rows), "kin_value": np.array([r[3] for r in rows], dtype=float),
+                "task_axes": np.array([a for a in range(3) if a != planes[0]] if planes else [0, 1, 2], dtype=int)}
+
+    def _moves_across(self, a: int, path: Array) -> bool:
+        """Whether the hand stays in a plane normal to the base axis e_a: every fixed rotation keeps e_a (up to sign),
+        every revolute joint on the path turns about ±e_a and every prismatic one slides across it."""
+        on = path > 0
+        keeps = (np.abs(np.abs(self.rotation[on][:, a, a]) - 1) < 1e-12).all() and \
+            (np.abs(np.abs(self.link_rotation[on][:, a, a]) - 1) < 1e-12).all()
+        kinds = np.array(list(self.joints))[on]
+        return bool(keeps and (np.abs(np.abs(self.axis[on][kinds == "R", a]) - 1) < 1e-12).all()
+                    and (np.abs(self.axis[on][kinds == "P", a]) < 1e-12).all())
+
+    @property
+    def task_axes(self) -> tuple[int, ...]:
+        """(0, 1, 2), or the two base axes of the plane the hand moves in when every fixed rotation on its path keeps
+        the third axis e_a, every revolute joint turns about ±e_a and every prismatic one slides across it (a planar
+        arm: (0, 1) for joints about z)."""
+        return tuple(int(a) for a in self._const["task_axes"])
+
+    def kinematic_names(self, tool: Array | None = None) -> tuple[str, ...]:
+        """The kinematic parameters of the hand position: for each joint on the hand's path, "<joint>.x|y|z" the nonzero
+        components (|·| > 1e-12 m) of its placement `translation` (the joint frame's origin in the parent link's axes:
+        a URDF joint's <origin xyz>), then "<joint>.link.x|y|z" those of `link_translation` (the link frame's origin in
+        the joint frame after the joint's motion), then "tool.x|y|z" when a tool is given. DH arms (:meth:`from_dh`),
+        standard convention: revolute joint i "jointi.link.x" = a_i, "jointi.link.z" = d_i; prismatic "jointi.z" = d_i
+        (the constant part), "jointi.link.x" = a_i. Modified (Craig): "jointi.x" = a_{i−1}; revolute "jointi.link.z" =
+        d_i; prismatic "jointi.y" = −d_i sin α_{i−1}, "jointi.z" = d_i cos α_{i−1}. A prismatic joint's travel q·axis
+        is no parameter (index 0 of the basis)."""
+        names: tuple[str, ...] = self._const["kin_names"]
+        return names + tool_names(tool)
+
+    def kinematic_values(self, tool: Array | None = None) -> Array:
+        """The values of `kinematic_names(tool)` (m): the chain's own, then the tool's."""
+        return tool_values(self._const["kin_value"], tool)
+
+    def hand(self, q: Array, dq: Array, tool: Array | None = None) -> Hand:
+        """The last link's frame offset by `tool` (:meth:`RobotModel.hand`): with S̃_j = [u_j; x_j] joint j's motion
+        in world axes at the world origin and V_j = [ω_j; v_j] = Σ S̃_l q̇_l over the joints that move link j,
+        J_j = [x_j + u_j × p; u_j] and, as Ṡ_j = V_j ×ₘ S̃_j = [ω_j × u_j; ω_j × x_j + v_j × u_j] (Featherstone 2008,
+        §2.9) and ṗ = v_n + ω_n × p, J̇_j = [ẋ_j + u̇_j × p + u_j × ṗ; u̇_j], for the joints that move the last link."""
+        xp, _, (q, dq) = self._inputs(q, dq)
+        return self._hand(xp, q, dq, tool)[0]
+
+    def _hand(self, xp: Any, q: Array, dq: Array, tool: Array | None) -> tuple[Hand, _Kin, Array, Array]:
+        """(the hand, the link poses, each link's angular velocity ω_j and the rate u̇_j of each joint axis)."""
+        kin = self._kinematics(xp, q)
+        u, x = kin.u, kin.x
+        V = self._ancestors(xp, dq[..., None] * xp.concat([u, x], axis=-1))
+        w, lin = V[..., 0:3], V[..., 3:6]
+        R = kin.R0[..., -1, :, :]
+        p = kin.p0[..., -1, :] if tool is None else kin.p0[..., -1, :] + _mv(R, xp.asarray(tool))
+        p_dot = lin[..., -1, :] + _cross(xp, w[..., -1, :], p)
+        du = _cross(xp, w, u)
+        dx = _cross(xp, w, x) + _cross(xp, lin, u)
+        path = self._const["hand_path"][:, None]
+        J = xp.concat([x + _cross(xp, u, p[..., None, :]), u], axis=-1) * path  # (..., n, 6): columns
+        dJ = xp.concat([dx + _cross(xp, du, p[..., None, :]) + _cross(xp, u, p_dot[..., None, :]), du], axis=-1) * path
+        return hand_on(xp, q, dq, p, R, xp.swapaxes(J, -1, -2), xp.swapaxes(dJ, -1, -2)), kin, w, du
+
+    def _kinematic_columns(self, q: Array, dq: Array, tool: Array | None) -> tuple[Hand, Array, Array, Array]:
+        """Each parameter multiplies a unit vector w_j = R_ℓ e_j fixed in a link ℓ (or the base):
+        ∂w_j/∂q_l = u_l × w_j for each revolute joint l that moves ℓ (u_l = 0 for a prismatic one), and
+        d/dt (u_l × w_j) = u̇_l × w_j + u_l × (ω_ℓ × w_j)."""
+        xp, _, (q, dq) = self._inputs(q, dq)
+        hand, kin, w, du = self._hand(xp, q, dq, tool)
+        k = len(self.kinematic_names(tool))
+        const = self._const
+        links = const["kin_link"][:k]
+        base = xp.broadcast_to(xp.eye(3), kin.R0.shape[:-3] + (1, 3, 3))  # the base's axes: index n
+        R_of = xp.take(xp.concat([kin.R0, base], axis=-3), links, axis=-3)
+        W = _mv(R_of, const["kin_vector"][:k])  # (..., k, 3)
+        omega = xp.take(xp.concat([w, xp.zeros(w.shape[:-2] + (1, 3))], axis=-2), links, axis=-2)
+        moved = const["kin_moved"][:k, :, None]  # (k, n, 1)
+        u = kin.u[..., None, :, :]
+        B = moved * _cross(xp, u, W[..., :, None, :])  # (..., k, n, 3)
+        dB = moved * (_cross(xp, du[..., None, :, :], W[..., :, None, :])
+                      + _cross(xp, u, _cross(xp, omega, W)[..., :, None, :]))
+        return hand, W, xp.swapaxes(B, -1, -2), xp.swapaxes(dB, -1, -2)
 
     # -- the recursion --------------------------------------------------------------------------------------------------
 

@@ -5,22 +5,29 @@
 The friction column uses the measured q̇, not v (docs/laws.md#robots). The optional spring term `k q` gives the
 three-parameter
 model of docs/laws.md#persistency-of-excitation (iii), which one sinusoid cannot excite.
+
+The dynamics have no length; the hand sits at the link's end, `length` = 1 m along the link (a class constant, the
+kinematic parameter "l"), in the frame Rz(q): p = l [cos q, sin q, 0] (+ the rotated tool offset).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 from ..arrays import array_namespace, matrix, vector
 from ..validation import check_switch
 from .base import Array, RobotModel
+from .hand import PlanarChain
 
 
 @dataclass(frozen=True, eq=False)
-class OneLinkArm(RobotModel):
+class OneLinkArm(PlanarChain, RobotModel):
     """One revolute joint, inertia `m`, viscous friction `b`, no gravity; optional joint stiffness `k`."""
 
     stiffness: bool = False
+    #: the link's length (m) to the hand: the kinematic parameter "l" (the dynamics do not depend on it)
+    length: ClassVar[float] = 1.0
 
     def __post_init__(self) -> None:
         check_switch(self.stiffness, "robot.stiffness")
@@ -54,3 +61,7 @@ class OneLinkArm(RobotModel):
         xp = array_namespace(q, dq)
         cols = [0.0 * q[..., 0], dq[..., 0]] + ([q[..., 0]] if self.stiffness else [])
         return vector(xp, cols)[..., None, :]
+
+    @property
+    def _hand_links(self) -> tuple[tuple[str, float], ...]:
+        return (("l", self.length),)

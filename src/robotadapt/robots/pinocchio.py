@@ -41,6 +41,7 @@ import numpy as np
 from ..validation import ConfigError, as_vector, check_switch
 from .base import Array, RobotModel
 from .dh import SMOOTH_VELOCITY
+from .hand import Hand
 
 _INERTIAL = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
 
@@ -129,6 +130,8 @@ def _unit_inertias() -> Array:
 
 _T = _unit_inertias().reshape(10, 36)
 _FRICTION = {"viscous": "fv", "coulomb": "fc", "smooth_coulomb": "fs", "offset": "off"}  # group → name prefix, in order
+_NO_BASIS = ("PinocchioArm has no kinematic basis (kinematic_basis, kinematic_regressor): take the same arm as a "
+             "KinematicTree (robotadapt.robots.kinematic_tree.KinematicTree.from_pinocchio(arm.pin_model)), which has it")
 
 
 @dataclass(frozen=True, eq=False)
@@ -264,6 +267,51 @@ class PinocchioArm(RobotModel):
         """Y_h(q, q̇), `Y_h φ = M q̇` (6.6.3): Y_p(q, 0, q̇) − Y_p(q, 0, 0), two calls; zero friction columns."""
         Y = self._each(self._momentum, (self.n, 10 * self.n), q, dq)
         return np.concatenate([Y, np.zeros(Y.shape[:-1] + (self.p - 10 * self.n,))], axis=-1)
+
+    # task space ------------------------------------------------------------------------------------------------------
+    def hand(self, q: Array, dq: Array, tool: Array | None = None) -> Hand:
+        """The last joint's frame offset by `tool` (:meth:`RobotModel.hand`), by Pinocchio's frame algorithms
+        (`computeJointJacobiansTimeVariation`, `updateFramePlacements`, `getFrameJacobian` and
+        `getFrameJacobianTimeVariation`, LOCAL_WORLD_ALIGNED) on a copy of the model holding that frame."""
+        pin, n = _pin(), self.n
+        model, data, frame = self._tool_frame(np.zeros(3) if tool is None else np.asarray(tool, dtype=float))
+
+        def one(q1: Array, dq1: Array) -> Array:
+            config = self._configuration(q1)
+            pin.computeJointJacobiansTimeVariation(model, data, config, dq1)
+            pin.updateFramePlacements(model, data)
+            X = data.oMf[frame]
+            return np.concatenate([X.translation, X.rotation.ravel(),
+                                   pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED).ravel(),
+                                   pin.getFrameJacobianTimeVariation(model, data, frame, pin.LOCAL_WORLD_ALIGNED).ravel()])
+
+        flat = self._each(one, (12 + 12 * n,), q, dq)
+        lead = flat.shape[:-1]
+        return Hand(flat[..., :3], flat[..., 3:12].reshape(lead + (3, 3)),
+                    flat[..., 12 : 12 + 6 * n].reshape(lead + (6, n)), flat[..., 12 + 6 * n :].reshape(lead + (6, n)))
+
+    def kinematic_names(self, tool: Array | None = None) -> tuple[str, ...]:
+        raise NotImplementedError(_NO_BASIS)
+
+    def kinematic_values(self, tool: Array | None = None) -> Array:
+        raise NotImplementedError(_NO_BASIS)
+
+    def _tool_frame(self, tool: Array) -> tuple[Any, Any, int]:
+        """(model, data, frame id) of a copy of the model with a frame at `tool` in the last joint's frame, cached per
+        offset (a few: a law uses one)."""
+        key = tool.tobytes()
+        if key not in self._frames:
+            pin, model = _pin(), self.pin_model.copy()
+            placement = pin.SE3(np.eye(3), tool)
+            frame = model.addFrame(pin.Frame("hand", model.njoints - 1, placement, pin.FrameType.OP_FRAME))
+            if len(self._frames) >= 8:
+                self._frames.clear()
+            self._frames[key] = (model, model.createData(), frame)
+        return self._frames[key]
+
+    @cached_property
+    def _frames(self) -> dict[bytes, tuple[Any, Any, int]]:
+        return {}
 
     # per-state Pinocchio calls -----------------------------------------------------------------------------------------
     @cached_property

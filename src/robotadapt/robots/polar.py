@@ -5,6 +5,9 @@ Example 3.2.1).
 
 M = diag(m r², m), V_m = m [[r ṙ, r θ̇], [−r θ̇, 0]] (Christoffel), G = [m g r cos θ, m g sin θ]. φ = [m]
 (+ [fv1, fv2] with `friction_terms=True`). M is singular at r = 0: keep the desired extension away from it.
+
+The hand is the mass, in the radial link's frame Rz(θ): p = r [cos θ, sin θ, 0] (+ R tool). The radial distance is the
+joint variable, so the arm has no kinematic parameter but a tool offset's (tool.x adds to r).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from dataclasses import dataclass
 from ..arrays import array_namespace, matrix, vector
 from ..validation import as_scalar, check_switch
 from .base import Array, RobotModel
+from .hand import Hand, hand_on, planar_axes, tool_names, tool_values
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,3 +76,38 @@ class PolarArm(RobotModel):
             return matrix(xp, [[y1], [y2]])
         zero = 0.0 * y1
         return matrix(xp, [[y1, dq[..., 0], zero], [y2, zero, dq[..., 1]]])
+
+    @property
+    def task_axes(self) -> tuple[int, ...]:
+        return (0, 1)
+
+    def kinematic_names(self, tool: Array | None = None) -> tuple[str, ...]:
+        """The tool offset's components, when a tool is given (the arm itself has no kinematic parameter)."""
+        return tool_names(tool)
+
+    def kinematic_values(self, tool: Array | None = None) -> Array:
+        return tool_values([], tool)
+
+    def hand(self, q: Array, dq: Array, tool: Array | None = None) -> Hand:
+        """The frame Rz(θ) at p = r e_r (+ R tool): J_v = [r e_θ, e_r] (+ e_z × R tool in column 1), J_ω = [e_z, 0],
+        J̇_v = [ṙ e_θ − r θ̇ e_r, θ̇ e_θ] (+ e_z × (θ̇ e_z × R tool))."""
+        return self._kinematic_columns(q, dq, tool)[0]
+
+    def _kinematic_columns(self, q: Array, dq: Array, tool: Array | None) -> tuple[Hand, Array, Array, Array]:
+        xp = array_namespace(q, dq)
+        r, dth, dr = q[..., 1], dq[..., 0], dq[..., 1]
+        W, B, dB = planar_axes(xp, q[..., 0], dth, [1.0, 0.0])  # the frame's axes turn with θ only
+        e_r, e_t = W[..., 0, :], W[..., 1, :]
+        p = r[..., None] * e_r
+        Jv = xp.stack([r[..., None] * e_t, e_r], axis=-1)
+        dJv = xp.stack([dr[..., None] * e_t - (r * dth)[..., None] * e_r, dth[..., None] * e_t], axis=-1)
+        R = xp.swapaxes(W, -1, -2)
+        if tool is None:
+            W, B, dB = W[..., :0, :], B[..., :0, :, :], dB[..., :0, :, :]
+        else:
+            offset = xp.asarray(tool, dtype=W.dtype)
+            p = p + (offset[:, None] * W).sum(axis=-2)
+            Jv = Jv + (offset[:, None, None] * B).sum(axis=-3)
+            dJv = dJv + (offset[:, None, None] * dB).sum(axis=-3)
+        Jw = xp.asarray([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0]]) + 0.0 * Jv
+        return hand_on(xp, q, dq, p, R, xp.concat([Jv, Jw], axis=-2), xp.concat([dJv, 0.0 * dJv], axis=-2)), W, B, dB

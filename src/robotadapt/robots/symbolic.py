@@ -24,9 +24,12 @@ from typing import Any
 import numpy as np
 
 from ..arrays import array_namespace
+from ..pytree import derived
 from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
 from .base import Array, RobotModel
 from .dh import EXTRAS, LINK_KEYS, SIGNED, SMOOTH_VELOCITY, Compiled, Geometry, SerialChain, compiled, joint_placements
+from .hand import Hand
+from .kinematic_tree import KinematicTree
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,6 +194,32 @@ class SymbolicArm(SerialChain, RobotModel):
 
     def gravity(self, q: Array, phi: Array) -> Array:
         return self._eval("gravity", (self.n,), q, self._inertial(phi))
+
+    # -- task space: through the same arm as a kinematic tree ----------------------------------------------------------
+
+    @derived
+    def kinematic_tree(self) -> KinematicTree:
+        """The same arm as a :class:`KinematicTree` (:meth:`KinematicTree.from_symbolic`), which gives the hand frame:
+        built once on the host and carried as part of the arm's tree, so a compiled program takes it too."""
+        return KinematicTree.from_symbolic(self)
+
+    @property
+    def task_axes(self) -> tuple[int, ...]:
+        return self.kinematic_tree.task_axes
+
+    def hand(self, q: Array, dq: Array, tool: Array | None = None) -> Hand:
+        """The last DH frame, offset by `tool` in it (:meth:`KinematicTree.hand`)."""
+        return self.kinematic_tree.hand(q, dq, tool)
+
+    def kinematic_names(self, tool: Array | None = None) -> tuple[str, ...]:
+        """:meth:`KinematicTree.kinematic_names` ("jointi.link.x" = a_i, "jointi.link.z" = d_i, standard DH)."""
+        return self.kinematic_tree.kinematic_names(tool)
+
+    def kinematic_values(self, tool: Array | None = None) -> Array:
+        return self.kinematic_tree.kinematic_values(tool)
+
+    def _kinematic_columns(self, q: Array, dq: Array, tool: Array | None) -> tuple[Hand, Array, Array, Array]:
+        return self.kinematic_tree._kinematic_columns(q, dq, tool)
 
     # -- Pinocchio ----------------------------------------------------------------------------------------------------
 

@@ -5,6 +5,9 @@ Angles from the horizontal, gravity along −y. φ = [m1, m2] (+ [fv1, fv2] with
     M  = [[(m1+m2) l1² + m2 l2² + 2 m2 l1 l2 c2,  m2 l2² + m2 l1 l2 c2], [m2 l2² + m2 l1 l2 c2,  m2 l2²]]
     V_m = m2 l1 l2 s2 [[−q̇2, −(q̇1+q̇2)], [q̇1, 0]]       (Christoffel form)
     G  = [(m1+m2) g l1 c1 + m2 g l2 c12,  m2 g l2 c12]
+
+The hand is link 2's frame R = Rz(q1 + q2) (x along link 2, z out of the plane) at p = [l1 c1 + l2 c12, l1 s1 + l2 s12,
+0] (+ R tool); kinematic parameters (l1, l2) (+ tool.x, tool.y, tool.z; tool.x adds to l2: one direction).
 """
 
 from __future__ import annotations
@@ -14,10 +17,11 @@ from dataclasses import dataclass
 from ..arrays import array_namespace, matrix
 from ..validation import as_scalar, check_switch
 from .base import Array, RobotModel
+from .hand import PlanarChain
 
 
 @dataclass(frozen=True, eq=False)
-class TwoLinkArm(RobotModel):
+class TwoLinkArm(PlanarChain, RobotModel):
     """Link lengths `l1, l2` (m) and gravity `g` (m/s²) are known constants; the book uses l1 = l2 = 1, g = 9.8."""
 
     l1: float = 1.0
@@ -95,3 +99,7 @@ class TwoLinkArm(RobotModel):
         if self.friction_terms:
             rows = [rows[0] + [dq1, zero], rows[1] + [zero, dq2]]
         return matrix(xp, rows)
+
+    @property
+    def _hand_links(self) -> tuple[tuple[str, float], ...]:
+        return (("l1", self.l1), ("l2", self.l2))

@@ -145,7 +145,8 @@ def _python(lanes: Sequence[tuple[Any, Any]], feed: Feed, mapped: Any, n: int, l
     logs: list[Any] = [None] * len(lanes)
     valid, T = np.zeros((n // log_every + 1,) + shape, bool), 0
     carries = [carry for _, carry in lanes]
-    accs = [running.start(np, shape if one else (), transition.loop.n) for transition, _ in lanes]
+    accs = [running.start(np, shape if one else (), transition.loop.n, transition.loop.controller.error_size)
+            for transition, _ in lanes]
     quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
     with tqdm(total=n + 1, delay=1.0, disable=quiet, unit="step", leave=False, file=sys.stderr) as bar, \
             np.errstate(all="ignore"):
@@ -355,7 +356,7 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     lead = shape if not _runs_shape(one_carry) else ()  # a mapped run's carry has no run axes; a stacked one has
     bad = map_tree(lambda a: jnp.zeros(lead + np.shape(a)), one.blanks(one_carry)[1])
     state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad)
-    folded = running.start(np, shape, one.loop.n)
+    folded = running.start(np, shape, one.loop.n, one.loop.controller.error_size)
     records, valid = [], []
     for first in range(0, blocks, per_call):
         size = per_call * log_every

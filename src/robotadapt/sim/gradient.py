@@ -111,7 +111,8 @@ class Rollout:
         t = self.times
         ref = Reference(*(jax_module().numpy.asarray(a) for a in trajectory(t)))
         z, tau = replace(self.transition, loop=loop).signals(self.records(loop, z0), t, ref)
-        return t, ref.q_des - loop.split(z)[0], tau, z
+        q, dq, _ = loop.split(z)
+        return t, loop.controller.tracking_error(q, dq, ref)[0], tau, z
 
 
 def check_differentiable(loop: ClosedLoop) -> None:

@@ -305,7 +305,8 @@ class RK4Step(Module):
         if s.ok is not None:
             why = array_namespace(why).where(s.ok, why, GUARD)
         q, dq, _ = self.loop.split(s.applied)
-        sample = Sample(r0.q_des - q, r0.dq_des - dq, s.u, s.tau)
+        e, de = self.loop.controller.tracking_error(q, dq, r0)
+        sample = Sample(e, de, s.u, s.tau)
         return (s.z, s.line), Logged(s.applied, sample), Verdict(None, why, s.z_bad)
 
     def compiled(self) -> Callable[[Any, Any], Any]:

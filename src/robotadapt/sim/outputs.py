@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..arrays import matvec
+from ..arrays import array_namespace, matvec
 from ..trajectories import Reference, Trajectory
 from ..validation import ConfigError
 from .compiled import compiled_map
@@ -97,7 +97,8 @@ def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z
         passivity, extras["passivity_running_min"] = carried
     extras.update(plant.extra_series(z[..., : loop.m]))
     return {"q": q, "dq": dq, "x": x, "q_des": ref.q_des, "dq_des": ref.dq_des, "ddq_des": ref.ddq_des, "tau": tau,
-            "V": maps["V"], "r": maps["r"], "phi_hat": maps["phi_hat"], "passivity": passivity, "truth": truth}, extras
+            "V": maps["V"], "r": maps["r"], "phi_hat": maps["phi_hat"], "passivity": passivity, "truth": truth,
+            "errors": maps.get("errors")}, extras
 
 
 def _maps(loop: ClosedLoop, flags: tuple[bool], times: Array, z: Array, ref: Reference, q_measured: Array | None,
@@ -117,6 +118,8 @@ def _maps(loop: ClosedLoop, flags: tuple[bool], times: Array, z: Array, ref: Ref
     if truth is not None:
         out["V"] = ctrl.lyapunov(times, x, q, dq, ref, truth)
     out["r"] = ctrl.filtered_error(times, x, q, dq, ref)
+    if ctrl.has("tracking_error"):  # a task-space law: e = x_d − x(q), not q_des − q
+        out["errors"] = array_namespace(q).stack(ctrl.tracking_error(q, dq, ref), axis=-2)
     return out
 
 

@@ -48,6 +48,9 @@ class SimulationResult:
     monitors: dict[str, Array] = field(default_factory=dict)
     #: metrics folded at every step or tick of a fixed-step run, whatever its logging interval (robotadapt.sim.running)
     running: dict[str, Any] | None = None
+    #: (e, ė) of a task-space law stacked, `(T, 2, m)`: x_d − x(q) and ẋ_d − J q̇ (its `q_des`, `dq_des`, `ddq_des`
+    #: then hold x_d, ẋ_d, ẍ_d); None: e = q_des − q
+    errors: Array | None = None
 
     def __repr__(self) -> str:
         """One line: status, samples, time span, joints, parameters and the final |e| (the arrays: `arrays()`)."""
@@ -63,14 +66,19 @@ class SimulationResult:
         return self.status == "ok"
 
     @property
+    def space(self) -> str:
+        """Where the tracking error lives: "joint" (e = q_des − q, rad) or "task" (e = x_d − x, m)."""
+        return "joint" if self.errors is None else "task"
+
+    @property
     def e(self) -> Array:
-        """Tracking error e = q_des − q."""
-        return self.q_des - self.q
+        """Tracking error e = q_des − q (a task-space law's x_d − x)."""
+        return self.q_des - self.q if self.errors is None else self.errors[..., 0, :]
 
     @property
     def de(self) -> Array:
-        """Velocity error ė = q̇_des − q̇."""
-        return self.dq_des - self.dq
+        """Velocity error ė = q̇_des − q̇ (a task-space law's ẋ_d − ẋ)."""
+        return self.dq_des - self.dq if self.errors is None else self.errors[..., 1, :]
 
     @property
     def phi_true(self) -> Array | None:

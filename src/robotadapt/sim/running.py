@@ -8,7 +8,8 @@ run's :class:`Running` where the record is valid. From the fold, at the end
 
 - `rms_error` √(Σ_k e_i(t_k)² / K) per joint and `rms_error_norm` √(Σ_k ‖e(t_k)‖² / K), K the number of instants;
 - `ise` ∫‖e‖² dt and `control_energy` ∫ τᵀτ dt by the trapezoid rule on the grid: h (Σ_k s_k − (s_0 + s_last)/2);
-- `max_abs_error`, `max_abs_torque` (applied), `max_abs_commanded_torque` per joint, over every instant;
+- `max_abs_error`, `max_abs_torque` (applied), `max_abs_commanded_torque` per joint, and `max_error_norm` max ‖e‖,
+  over every instant;
 - `saturated_fraction`, the share of instants whose applied torque differs from the command
   (:func:`robotadapt.analysis.metrics.saturated_fraction`'s rule);
 - `convergence_time`, the last instant with ‖e‖ above 1 % of its maximum over the run (None: the last one): the last
@@ -56,15 +57,15 @@ class Running(NamedTuple):
     k_last: Array  # the last step index folded
 
 
-def start(xp: Any, runs: tuple[int, ...], n: int) -> Running:
-    """The fold before step 0."""
-    zeros, vector = xp.zeros(runs), xp.zeros(runs + (n,))
-    return Running(zeros, vector, zeros, zeros, xp.zeros(runs + (2,)), xp.zeros(runs + (2,)), vector, vector, vector,
+def start(xp: Any, runs: tuple[int, ...], n: int, m: int | None = None) -> Running:
+    """The fold before step 0: `n` torques, `m` entries of the tracking error (default n; a task-space law's m)."""
+    zeros, vector, error = xp.zeros(runs), xp.zeros(runs + (n,)), xp.zeros(runs + (n if m is None else m,))
+    return Running(zeros, error, zeros, zeros, xp.zeros(runs + (2,)), xp.zeros(runs + (2,)), error, vector, vector,
                    zeros, zeros, zeros - 1.0, zeros - 1.0)
 
 
 def row(sample: Sample, valid: Array) -> Array:
-    """What a step hands the fold, as one array `(runs..., 3n + 1)`: e, the applied torque, the command, and 1.0 where
+    """What a step hands the fold, as one array `(runs..., m + 2n + 1)`: e, the applied torque, the command, and 1.0 where
     the step's record is valid (else 0.0). A compiled loop writes one a step (one array: XLA runs each output's update
     as a kernel of its own) and :func:`fold_rows` folds a call's rows at once on the host: the fold inside the loop
     cost Example 6.3.1's compiled step some 8 µs of kernels, the rows 0.1 µs (benchmarks/bench_single_run.py)."""
@@ -75,15 +76,15 @@ def row(sample: Sample, valid: Array) -> Array:
 
 
 def fold_rows(acc: Running, rows: Array, ks: Array) -> Running:
-    """`acc` with the :func:`row`s of some steps, `(steps, runs..., 3n + 1)`, folded in one vectorized pass (numpy);
+    """`acc` with the :func:`row`s of some steps, `(steps, runs..., m + 2n + 1)`, folded in one vectorized pass (numpy);
     `ks` the steps' indices. The same sums as a step-by-step fold to the order of the additions (each run's steps
     added, then to its sum), the same maxima, first and last values."""
     rows = np.asarray(rows)
     if rows.shape[0] == 0:
         return acc
-    n = (rows.shape[-1] - 1) // 3
-    c = np.ascontiguousarray(np.moveaxis(rows, 0, -1))  # (runs..., 3n + 1, steps): numpy's loops run along the steps
-    e, tau, commanded, ok = c[..., :n, :], c[..., n : 2 * n, :], c[..., 2 * n : 3 * n, :], c[..., -1, :] > 0.5
+    m, n = acc.sum_e2.shape[-1], acc.max_abs_tau.shape[-1]
+    c = np.ascontiguousarray(np.moveaxis(rows, 0, -1))  # (runs..., m + 2n + 1, steps): numpy's loops run along the steps
+    e, tau, commanded, ok = c[..., :m, :], c[..., m : m + n, :], c[..., m + n : m + 2 * n, :], c[..., -1, :] > 0.5
     k = np.broadcast_to(np.asarray(ks, dtype=float), ok.shape)
     every = bool(ok.all())  # the common case: no step to leave out (no mask applied)
     zero = ~ok[..., None, :]
@@ -131,7 +132,8 @@ def values(acc: Running, h: float) -> dict[str, Any]:
     above = int(acc.above)
     return {"rms_error": np.sqrt(acc.sum_e2 / count).tolist(), "rms_error_norm": float(np.sqrt(acc.sum_norm2 / count)),
             "ise": float(trapezoid[0]), "control_energy": float(trapezoid[1]),
-            "max_abs_error": acc.max_abs_e.tolist(), "max_abs_torque": acc.max_abs_tau.tolist(),
+            "max_abs_error": acc.max_abs_e.tolist(), "max_error_norm": float(acc.max_norm),
+            "max_abs_torque": acc.max_abs_tau.tolist(),
             "max_abs_commanded_torque": acc.max_abs_commanded.tolist(),
             "saturated_fraction": float(acc.saturated) / count,
             "convergence_time": 0.0 if above < 0 else None if above == int(acc.k_last) else above * h}

@@ -189,7 +189,8 @@ class Tick(Module):
         """Step 5, from the carry `sample` returned."""
         z = array_namespace(carry.s, carry.x).concatenate([carry.s, carry.x, carry.w])
         n = self.loop.n
-        tally = running.Sample(ref.q_des - carry.s[:n], ref.dq_des - carry.s[n : 2 * n], sample.u, sample.tau)
+        e, de = self.loop.controller.tracking_error(carry.s[:n], carry.s[n : 2 * n], ref)
+        tally = running.Sample(e, de, sample.u, sample.tau)
         return Record(z, sample.u, sample.tau, sample.q_m, sample.dq_m, tally)
 
     def advance(self, carry: Carry, inputs: Any, sample: Sample,

@@ -67,6 +67,11 @@ def contenders() -> dict[str, Contender]:
     return {c.name: c for c in sorted(found, key=lambda c: (c.rank, c.name))}
 
 
+def _space(section: dict[str, Any]) -> str:
+    """Where the law of a [controller] table tracks its reference: "joint" or "task" (`Law.space`)."""
+    return getattr(constructor("controller", section.get("kind"), "controller.kind")[0], "space", "joint")
+
+
 def _books() -> dict[str, Contender]:
     """Each family's entry whose K_v is k_v,book, the denominator of the arm's scale (module docstring)."""
     return {law.family: c for law in registered("controller").values() for c in law.lineup if c.book_kv and law.family}
@@ -349,7 +354,8 @@ def lineup(base: Scenario, names: list[str] | None = None) -> tuple[list[Entry],
     controller is the reference, in place of the lineup entry of the same kinds or as "scenario"; the other laws' gains
     and initial estimate follow the scenario (module docstring)."""
     own = base.data["controller"]
-    every = contenders()
+    space = _space(own)  # the laws of the scenario's law's space: joint angles, or the hand (docs/task-space.md)
+    every = {name: c for name, c in contenders().items() if _space(c.section) == space}
     match = next((n for n, c in every.items() if _kinds(c.section) == _kinds(own)), None)
     known = list(every) + ([] if match else ["scenario"])
     for name in names or ():

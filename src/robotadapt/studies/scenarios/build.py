@@ -28,7 +28,9 @@ from ...plant.plant import Plant, sinusoidal_disturbance
 from ...plant.sensors import Sensor
 from ...plant.unmodeled import ElasticJoint, Payload
 from ...robots import RobotModel
+from ...robots.workspace import inverse_kinematics, reach
 from ...sim.integrators import RK4, Sampled, SolveIVP, check_backend
+from ...task_trajectories import reach_check
 from ...validation import ConfigError, as_array, as_scalar, as_vector, check_names
 
 # kind → "module:attribute" (imported on use, so optional parts cost nothing until named) and what the constructor
@@ -52,6 +54,10 @@ TARGETS: dict[str, dict[str, tuple[str, str | None]]] = {
         "exponential_step": ("trajectories:exponential_step", "n"),
         "quintic": ("trajectories:quintic", "n"),
         "constant": ("trajectories:constant", "n"),
+        # the hand's path, for a task-space law (docs/task-space.md); a sum of sines there has one sine per coordinate
+        "circle": ("task_trajectories:Circle", None),
+        "figure_eight": ("task_trajectories:FigureEight", None),
+        "line": ("task_trajectories:Line", None),
     },
     "servo": {
         "pd": ("controllers.passivity:pd_servo", "n"),
@@ -238,10 +244,10 @@ def per_parameter(value: Any, model: RobotModel, field: str, *, broadcast: bool)
     return arr
 
 
-def build(registry: str, section: Any, name: str, model: RobotModel | None = None) -> Any:
+def build(registry: str, section: Any, name: str, model: RobotModel | None = None, n: int | None = None) -> Any:
     """Call the constructor that `section['kind']` names in `registry` (:func:`constructor`) with the section's other
     keys; nested tables (servo, law, base) are built first. `phi_hat0` defaults to zeros; a plain number is that value
-    for all."""
+    for all. `n`: the dimension a trajectory takes first (default the arm's joints; a task-space law's m)."""
     if not isinstance(section, dict):
         raise ConfigError(name, f"expected a table with a kind ({', '.join(sorted(kinds(registry)))}), got {section!r}")
     ctor, first = constructor(registry, section.get("kind"), f"{name}.kind")
@@ -255,7 +261,8 @@ def build(registry: str, section: Any, name: str, model: RobotModel | None = Non
                                          broadcast=True)
     for key in NESTED.keys() & keys.keys():
         keys[key] = build(NESTED[key], keys[key], f"{name}.{key}", model)
-    args = () if first is None else ({"model": model, "n": model.n, "p": model.p}[first],)  # type: ignore[union-attr]
+    sizes = {} if model is None else {"model": model, "n": model.n if n is None else n, "p": model.p}
+    args = () if first is None else (sizes[first],)
     try:
         return ctor(*args, **keys)
     except ConfigError as exc:  # "controller.Kv" raised by a nested base is "controller.base.Kv" here
@@ -263,6 +270,25 @@ def build(registry: str, section: Any, name: str, model: RobotModel | None = Non
         if name == root or not (exc.field == root or exc.field.startswith(root + ".")):
             raise
         raise ConfigError(name + exc.field[len(root):], exc.reason) from None
+
+
+def _on_path(law: Any, trajectory: Any, t_final: float, q0: np.ndarray, dq0: np.ndarray,
+             section: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A task-space run's start (docs/task-space.md): the path checked against the arm's reach (one line naming the
+    first point out of it), then, unless `plant.q0` / `plant.dq0` are given, the hand at x_d(0) (the joint angles
+    nearest the law's posture) moving at ẋ_d(0) (q̇ = J⁺ ẋ_d(0))."""
+    model, tool = law.model, law.tool
+    bound = reach(model, tool)
+    if bound is not None:
+        reach_check(trajectory, bound[0], bound[1], bound[2], t_final)
+    ref = trajectory(0.0)
+    section = section if isinstance(section, dict) else {}
+    if "q0" not in section:
+        q0 = inverse_kinematics(model, ref.q_des, law.posture, tool)
+    if "dq0" not in section:
+        m = law.error_size
+        dq0 = np.linalg.pinv(np.asarray(model.hand(q0, np.zeros(model.n), tool).J)[:m]) @ np.asarray(ref.dq_des)
+    return q0, dq0
 
 
 def resolved(registry: str, section: dict[str, Any], model: RobotModel | None = None) -> dict[str, Any]:
@@ -578,7 +604,12 @@ def setup(data: dict[str, Any]) -> Setup:
     the_plant, q0, dq0, plant_data = plant(data.get("plant", {}), model, data["robot"])  # every key has a default
     t_final, integ, log_every, max_state, sim_data = simulation(data["simulation"])
     controller = build("controller", _truth_tables(data["controller"], the_plant, model), "controller", model)
-    trajectory = build("trajectory", data["trajectory"], "trajectory", model)
+    task = getattr(controller, "space", "joint") == "task"
+    size = controller.error_size if task else None
+    trajectory = build("trajectory", data["trajectory"], "trajectory", model, size)
+    if task:
+        q0, dq0 = _on_path(controller, trajectory, t_final, q0, dq0, data.get("plant", {}))
+        plant_data = {**plant_data, "q0": q0.tolist(), "dq0": dq0.tolist()}
     full = {**data, "robot": resolved("robot", data["robot"]), "plant": plant_data,
             "trajectory": resolved("trajectory", data["trajectory"], model),
             "controller": resolved("controller", data["controller"], model), "simulation": sim_data}
