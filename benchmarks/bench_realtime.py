@@ -7,7 +7,8 @@ collector off, as in a real-time loop; prints p50, p99 and max per arm and backe
 (issue 22: the compiled step p99 ≤ 50 µs, max ≤ 500 µs; issue 28: through RealtimeController's C backend p99 ≤ 15 µs
 two-link, ≤ 30 µs Panda) and the machine's load average before and after (other processes on the same cores show up in
 p99 and max). The "C from C" row times the exported `ra_step` inside a C program (`clock_gettime` around each call,
-the inputs read beforehand; goal p99 ≤ 5 µs two-link, ≤ 20 µs Panda): what a robot's callback pays. The compiled
+the inputs read beforehand; goal p99 ≤ 5 µs two-link, ≤ 20 µs Panda, ≤ 5 µs the Panda's task-space Slotine–Li, issue
+44): what a robot's callback pays. The compiled
 backends take `STEPS` steps; the numpy one, 5–50 times slower, a tenth of them.
 """
 
@@ -25,18 +26,29 @@ import numpy as np
 
 from robotadapt.native.build import require_compiler
 from robotadapt.realtime import RealtimeController
+from robotadapt.studies.scenarios import load
 
 STEPS = 100_000
-ARMS = (("two-link arm", "example-6.3.1"), ("PUMA 560", "puma560-slotine-li"), ("Panda", "panda-slotine-li"))
+ARMS = (("two-link arm", "example-6.3.1"), ("PUMA 560", "puma560-slotine-li"), ("Panda", "panda-slotine-li"),
+        ("Panda, task-space Slotine–Li", "panda-task-circle"))
 GOAL_P99_US, GOAL_MAX_US = 50.0, 500.0  # of the compiled step
+
+
+def measured(scenario: str, ctrl: RealtimeController, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The measurements: the desired joint state (a task-space law's: the arm's start) with a small error."""
+    ref = ctrl.trajectory(t)
+    q, dq = np.asarray(ref.q_des), np.asarray(ref.dq_des)
+    if q.shape[-1] != ctrl.n:
+        start = load(scenario).setup
+        q, dq = np.broadcast_to(start.q0, (t.size, ctrl.n)), np.broadcast_to(start.dq0, (t.size, ctrl.n))
+    return q + 1e-3 * np.sin(t)[:, None], dq + 1e-3 * np.cos(t)[:, None]
 
 
 def latencies(scenario: str, backend: str, steps: int) -> np.ndarray:
     """The time of each of `steps` calls of step(t, q, dq), µs."""
     ctrl = RealtimeController.from_scenario(scenario, backend=backend)
     t = ctrl.Ts * np.arange(steps)
-    ref = ctrl.trajectory(t)
-    q, dq = ref.q_des + 1e-3 * np.sin(t)[:, None], ref.dq_des + 1e-3 * np.cos(t)[:, None]  # a small tracking error
+    q, dq = measured(scenario, ctrl, t)
     ctrl.reset(q[0], dq[0])
     ctrl.step(0.0, q[0], dq[0])  # the first call of a program may load it: not part of the loop
     out = np.empty(steps)
@@ -82,8 +94,7 @@ def c_latencies(scenario: str, steps: int) -> np.ndarray:
     cc = require_compiler("bench")
     ctrl = RealtimeController.from_scenario(scenario, backend="numpy")
     t = ctrl.Ts * np.arange(steps)
-    ref = ctrl.trajectory(t)
-    rows = np.column_stack([t, ref.q_des + 1e-3 * np.sin(t)[:, None], ref.dq_des + 1e-3 * np.cos(t)[:, None]])
+    rows = np.column_stack([t, *measured(scenario, ctrl, t)])
     code = ctrl.export("ra")
     with tempfile.TemporaryDirectory() as tmp:
         for name, text in (("ra.h", code.header), ("ra.c", code.source), ("timer.c", TIMER)):

@@ -60,6 +60,10 @@ LAWS: dict[str, tuple[str, tuple[str, ...]]] = {
     "dcal": ("example-7.2.1", ()),
     "repetitive": ("example-7.2.2", ("trajectory.omega=6.0", f"controller.period={_T!r}", f"simulation.dt={_T / 1000!r}",
                                      f"simulation.t_final={1.1 * _T!r}", "simulation.log_every=1")),
+    "task_slotine_li": ("task-circle-2link", ()),
+    "adaptive_jacobian": ("task-jacobian-2link", ()),
+    "operational_space": ("task-circle-2link", ("controller={kind = 'operational_space', Kp = 100.0, Kv = 20.0, "
+                                                "phi_hat0 = [0.8, 2.3], posture = [0.0, 1.5]}",)),
 }
 FAST = ("slotine_li", "pd")  # the rows the fast suite computes
 # the gain the gradient cell differentiates in, default controller.Kv: the sign-robust law's K_v is its base law's

@@ -178,3 +178,29 @@ def test_the_comparison_of_a_task_scenario_runs_the_task_laws(tmp_path):
     assert main(["compare", "task-circle-2link", "--t-final", "1", "--out", str(tmp_path)]) == 0
     rows = json.loads((tmp_path / "comparison.json").read_text())["rows"]
     assert {r["controller"] for r in rows} == {"operational_space", "task_slotine_li", "adaptive_jacobian"}
+
+
+@pytest.mark.parametrize("adaptation", ["natural", "pullback"])
+def test_cartesian_slotine_li_takes_every_update_law(adaptation):
+    """On the Panda (URDF bodies): the natural and the pullback law keep V falling and every estimate a real body."""
+    res = ra.load("panda-task-circle", [f'controller.adaptation="{adaptation}"', "controller.gamma=0.1",
+                                        "simulation.t_final=0.5"]).run()
+    m = ra.metrics(res)
+    assert res.ok and m["physically_consistent"] and m["task_max_error"] < 0.01
+    assert np.max(np.diff(res.V)) <= 1e-9 * res.V[0]
+
+
+def test_a_task_run_draws_its_path_and_kinematic_estimates(tmp_path):
+    """path.png (the hand over the desired path, in the arm's plane) and kinematics.png (θ̂_k and its truth)."""
+    from robotadapt.report.task_figures import kinematics_figure, path_figure
+
+    res = ra.load("task-jacobian-2link", ["simulation.t_final=1.0"]).run()
+    written = {p.name for p in ra.save_figures(res, tmp_path, "aj")}
+    assert {"path.png", "kinematics.png", "tracking_error.png"} <= written
+    ax = path_figure(res).axes[0]
+    hand, desired = (line.get_xydata() for line in ax.get_lines()[:2])
+    np.testing.assert_allclose(desired, res.q_des)
+    np.testing.assert_allclose(hand, res.q_des - res.e)
+    lines = kinematics_figure(res).axes[0].get_lines()
+    np.testing.assert_allclose(lines[0].get_ydata(), res.monitors["theta_hat"][:, 0])
+    np.testing.assert_allclose(lines[1].get_ydata(), 1.0)

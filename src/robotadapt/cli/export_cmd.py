@@ -83,7 +83,8 @@ CHECK_TOLERANCE = 1e-9  # relative to max |τ|: the C and the Python step differ
 
 def _check(scenario: str, overrides: list[str], harness: Path, ticks: int) -> dict[str, float]:
     """The built harness against the Python step (`RealtimeController`, numpy) on `ticks` measurements: the desired
-    trajectory with deterministic deviations of a few mrad, as a robot's log; a ConfigError beyond CHECK_TOLERANCE."""
+    trajectory (a task-space law's: the arm's start) with deterministic deviations of a few mrad, as a robot's log; a
+    ConfigError beyond CHECK_TOLERANCE."""
     import numpy as np
 
     from ..realtime import RealtimeController
@@ -94,7 +95,13 @@ def _check(scenario: str, overrides: list[str], harness: Path, ticks: int) -> di
     n, t = ctrl.n, ctrl.Ts * np.arange(ticks)
     ref = ctrl.trajectory(t)
     wobble = 0.003 * np.sin(np.outer(t, 1.0 + np.arange(n)) + 0.4)
-    rows = np.column_stack([t, np.asarray(ref.q_des) + wobble, np.asarray(ref.dq_des) - 0.5 * wobble])
+    q, dq = np.asarray(ref.q_des), np.asarray(ref.dq_des)
+    if q.shape[-1] != n:  # a task-space law's reference is the hand's: the arm near its start instead
+        from ..studies.scenarios import load
+
+        start = load(scenario, overrides).setup
+        q, dq = np.broadcast_to(start.q0, (ticks, n)), np.broadcast_to(start.dq0, (ticks, n))
+    rows = np.column_stack([t, q + wobble, dq - 0.5 * wobble])
     text = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows)
     done = subprocess.run([str(harness)], input=text, capture_output=True, text=True)
     if done.returncode != 0:

@@ -156,7 +156,7 @@ def positive(y: np.ndarray) -> np.ndarray:
 # the figures of one run
 
 
-def _panels(k: int, height: float = 2.6) -> tuple[Figure, list[Any]]:
+def panels(k: int, height: float = 2.6) -> tuple[Figure, list[Any]]:
     """k stacked panels sharing time, laid out at the dpi they are written at (matplotlib parses each mathtext label
     once per dpi: laid out at another, every label is parsed twice, a third of a fresh `robotadapt run`'s figure
     time)."""
@@ -165,7 +165,7 @@ def _panels(k: int, height: float = 2.6) -> tuple[Figure, list[Any]]:
     return fig, list(axes[:, 0])
 
 
-def _finish(fig: Figure, axes: list[Any], title: str) -> Figure:
+def finish(fig: Figure, axes: list[Any], title: str) -> Figure:
     fig.suptitle(title)
     axes[-1].set_xlabel("time $t$ (s)")
     for ax in axes:
@@ -181,7 +181,7 @@ def legend(ax: Any) -> None:
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small", borderaxespad=0.0)
 
 
-def _title(title: str, what: str) -> str:
+def titled(title: str, what: str) -> str:
     return f"{title} — {what}" if title else what[:1].upper() + what[1:]
 
 
@@ -189,25 +189,28 @@ def _joint_panels(values: np.ndarray, t: np.ndarray, symbol: str, ylabel: Callab
                   model: Any) -> Figure:
     """One signal per joint, `values` `(T, n)` labelled `symbol`_i: a panel per joint type, `ylabel(kind)` on each."""
     groups = joint_groups(values.shape[-1], joint_types(model) if model is not None else None)
-    fig, axes = _panels(len(groups))
+    fig, axes = panels(len(groups))
     for ax, (kind, joints) in zip(axes, groups, strict=True):
         for i in joints:
             ax.plot(t, values[:, i], label=f"${symbol}_{{{i + 1}}}$", **style(i))
         ax.set_ylabel(ylabel(kind))
         if len(groups) > 1:
             ax.set_title(JOINT_NAME[kind].removesuffix("s" if len(joints) == 1 else ""), fontsize="medium")
-    return _finish(fig, axes, title)
+    return finish(fig, axes, title)
 
 
 def tracking_error_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
     """e_i(t) = q_d,i − q_i for every joint, per joint type (rad for revolute, m for prismatic joints): e on a linear
-    axis, then |e| on a log axis, where a convergence to round-off (1e-10 and below) shows instead of a flat zero."""
-    groups = joint_groups(res.e.shape[-1], joint_types(model) if model is not None else None)
-    fig, axes = _panels(2 * len(groups), height=2.0)
+    axis, then |e| on a log axis, where a convergence to round-off (1e-10 and below) shows instead of a flat zero. A
+    task-space law's run: the hand's e = x_d − x, per coordinate x, y (, z), in metres."""
+    task = res.space == "task"
+    m = res.e.shape[-1]
+    groups = [("P", list(range(m)))] if task else joint_groups(m, joint_types(model) if model is not None else None)
+    fig, axes = panels(2 * len(groups), height=2.0)
     for k, (kind, joints) in enumerate(groups):
         linear, log = axes[2 * k], axes[2 * k + 1]
         for i in joints:
-            linear.plot(res.t, res.e[:, i], label=f"$e_{{{i + 1}}}$", **style(i))
+            linear.plot(res.t, res.e[:, i], label=f"$e_{'xyz'[i]}$" if task else f"$e_{{{i + 1}}}$", **style(i))
             magnitude = positive(np.abs(res.e[:, i]))
             if np.isfinite(magnitude).any():  # a joint whose error is exactly 0 throughout has no log line
                 log.semilogy(res.t, magnitude, **style(i))
@@ -216,14 +219,14 @@ def tracking_error_figure(res: SimulationResult, title: str = "", model: Any = N
         log.set_ylabel(f"$|e_i|$ ({POSITION[kind]}), log scale")
         if len(groups) > 1:
             linear.set_title(JOINT_NAME[kind].removesuffix("s" if len(joints) == 1 else ""), fontsize="medium")
-    return _finish(fig, axes, _title(title, "tracking error $e = q_d - q$"))
+    return finish(fig, axes, titled(title, "hand error $e = x_d - x$" if task else "tracking error $e = q_d - q$"))
 
 
 def torques_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
     """Controller output τ_i(t): torques (N·m) at revolute joints, forces (N) at prismatic ones, a panel each; the
     actuator's limit ±τ_max,i, where the plant has one, dotted in each joint's colour."""
     fig = _joint_panels(res.tau, res.t, "\\tau", lambda kind: f"{EFFORT_NAME[kind]} $\\tau_i$ ({EFFORT[kind]})",
-                        _title(title, "control input $\\tau$"), model)
+                        titled(title, "control input $\\tau$"), model)
     limit = res.info.get("plant", {}).get("actuator", {}).get("torque_limit")
     if limit is not None:
         limits = np.broadcast_to(np.asarray(limit, dtype=float), (res.tau.shape[-1],))
@@ -254,7 +257,7 @@ def _base_parameters_figure(res: SimulationResult, title: str, basis: Any) -> Fi
     """What the dynamics see of the estimate: K φ̂(t) against K φ for up to `MAX_PARAMETER_LINES` base parameters, else
     ‖K(φ − φ̂(t))‖ / ‖K φ‖ (‖K φ̂(t)‖ when the truth is unknown); the title counts the unidentifiable directions."""
     b, p = basis.count, basis.K.shape[1]
-    fig, axes = _panels(1)
+    fig, axes = panels(1)
     ax, truth, est = axes[0], res.phi_true, basis.base(res.phi_hat)
     if b <= MAX_PARAMETER_LINES:
         for i, name in enumerate(basis.names):
@@ -274,7 +277,7 @@ def _base_parameters_figure(res: SimulationResult, title: str, basis: Any) -> Fi
         ax.plot(res.t, np.linalg.norm(est, axis=-1), label=f"{b} base parameters")
         ax.set_ylabel(r"$\Vert K\hat{\varphi}\Vert$ (mixed units)")
         what = "base-parameter estimates"
-    return _finish(fig, axes, _title(title, f"{what}; {p - b} of {p} directions unidentifiable"))
+    return finish(fig, axes, titled(title, f"{what}; {p - b} of {p} directions unidentifiable"))
 
 
 def parameters_figure(res: SimulationResult, title: str = "", model: Any = None) -> Figure:
@@ -289,16 +292,16 @@ def parameters_figure(res: SimulationResult, title: str = "", model: Any = None)
     if basis is not None and basis.K.shape[1] == len(names):
         return _base_parameters_figure(res, title, basis)
     if not names or len(names) > MAX_PARAMETER_LINES:
-        fig, axes = _panels(1)
+        fig, axes = panels(1)
         if names:
             _many_parameters(res, axes[0])
         else:
             axes[0].text(0.5, 0.5, "this controller estimates no parameters", ha="center", va="center",
                          transform=axes[0].transAxes)
-        return _finish(fig, axes, _title(title, "parameter error" if truth is not None else "parameter estimates"))
+        return finish(fig, axes, titled(title, "parameter error" if truth is not None else "parameter estimates"))
     units = parameter_units(model, names)
     groups = list(dict.fromkeys(units))
-    fig, axes = _panels(len(groups), height=2.4)
+    fig, axes = panels(len(groups), height=2.4)
     for ax, unit in zip(axes, groups, strict=True):
         for i, name in enumerate(names):
             if units[i] != unit:
@@ -311,7 +314,7 @@ def parameters_figure(res: SimulationResult, title: str = "", model: Any = None)
                       + (f" ({unit})" if unit else ""))
     what = r"estimates $\hat{\varphi}$ (solid), true $\varphi$ (dashed)" if truth is not None else \
         r"estimates $\hat{\varphi}$"
-    return _finish(fig, axes, _title(title, f"parameter {what}"))
+    return finish(fig, axes, titled(title, f"parameter {what}"))
 
 
 def tracking_error(res: SimulationResult, path: Path, title: str = "", model: Any = None,
@@ -338,11 +341,19 @@ RUN_FIGURES = ("tracking_error", "parameters", "torques")
 
 def save_figures(res: SimulationResult, directory: str | os.PathLike[str], title: str = "",
                  model: Any = None, output: FigureFormat = PNG) -> list[Path]:
-    """Write `tracking_error.png`, `parameters.png` and `torques.png` (the suffix `output`'s format) into `directory`;
-    `model` (the controller's) gives the units (joint types, parameter units), else the axes say "rad or m"."""
+    """Write `tracking_error.png`, `parameters.png` and `torques.png` (the suffix `output`'s format) into `directory`,
+    and for a task-space law's run `path.png` (and `kinematics.png` for the adaptive Jacobian's θ̂_k); `model` (the
+    controller's) gives the units (joint types, parameter units), else the axes say "rad or m"."""
     directory = writable_dir(directory)
-    return [write(res, directory / output.name(stem), title, model, output)
-            for stem, write in zip(RUN_FIGURES, (tracking_error, parameters, torques), strict=True)]
+    written = [write(res, directory / output.name(stem), title, model, output)
+               for stem, write in zip(RUN_FIGURES, (tracking_error, parameters, torques), strict=True)]
+    if res.space == "task":  # the hand's path, and the kinematic estimate of a law that has one
+        from .task_figures import kinematics_figure, path_figure
+
+        written.append(save_figure(path_figure(res, title), directory / output.name("path"), output))
+        if "theta_hat" in res.monitors:
+            written.append(save_figure(kinematics_figure(res, title), directory / output.name("kinematics"), output))
+    return written
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -368,7 +379,7 @@ def study_figure(key: str, runs: list[Any], title: str = "", model: Any = None) 
     ax_p.set_ylabel(r"$\Vert\varphi - \hat{\varphi}(t)\Vert$" if known else r"$\Vert\hat{\varphi}(t)\Vert$")
     ax_e.set_title("tracking error", fontsize="medium")
     ax_p.set_title("parameter error" if known else "parameter estimate", fontsize="medium")
-    return _finish(fig, [ax_e, ax_p], _title(title, f"effect of {key}"))
+    return finish(fig, [ax_e, ax_p], titled(title, f"effect of {key}"))
 
 
 def study_style(runs: list[Any], i: int) -> dict[str, Any]:

@@ -235,7 +235,8 @@ def _scan_program(structure: Any, mapped: Any, native: bool) -> Callable[..., An
                 return state, kept, lax.dynamic_update_index_in_dim(carried[2], row, i, 0)
 
             blank = (traced.blanks(state[0])[0], jnp.zeros_like(state[1]))
-            rows = jnp.zeros((xs.k.shape[0],) + state[1].shape + (3 * traced.loop.n + 1,))
+            width = traced.loop.controller.error_size + 2 * traced.loop.n + 1  # a running.row
+            rows = jnp.zeros((xs.k.shape[0],) + state[1].shape + (width,))
             state, kept, rows = lax.fori_loop(0, count, body, (state, blank, rows))
             return state, (*kept, rows)
 
@@ -346,7 +347,8 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     one = transition if mapped is None else runs[0]
     static = (pytree.key(one), log_every, axes) if native else None  # what the C program is
     probe = feed(0, 1)
-    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe)) + 8 * int(np.prod(shape)) * (3 * one.loop.n + 1)
+    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe)) + 8 * int(np.prod(shape)) * (
+        one.loop.controller.error_size + 2 * one.loop.n + 1)
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
     most = max(1, int(min(CHUNK_STEPS, INPUT_BYTES // max(step_bytes, 1))) // log_every)
     # XLA: a power of two, few shapes and compilations; C: one shape per program whatever the run's length (gcc builds

@@ -71,7 +71,8 @@ def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z
     the extra monitor series."""
     ctrl, plant = loop.controller, loop.plant
     q, dq, x = loop.split(z)
-    ref = Reference(*(a if a.shape == q.shape else np.broadcast_to(a, q.shape) for a in trajectory(times)))
+    shape = q.shape[:-1] + (ctrl.error_size,)  # the reference's: joints, or a task-space law's coordinates
+    ref = Reference(*(a if a.shape == shape else np.broadcast_to(a, shape) for a in trajectory(times)))
     extras = dict(logged or {})
     truth = plant.truth_for(ctrl.model, times)
     args = (times, z, ref, extras.get("q_measured"), extras.get("dq_measured"), truth)

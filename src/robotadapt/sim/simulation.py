@@ -134,8 +134,10 @@ def simulate(plant: Plant, controller: Law, trajectory: Trajectory, *, t_final: 
     n = plant.model.n
     if controller.model.n != n:
         raise ConfigError("controller", f"the controller's model has {controller.model.n} joints, the plant {n}")
-    if trajectory.n != n:
-        raise ConfigError("trajectory", f"the trajectory has {trajectory.n} joints, the robot {n}")
+    size = as_law(controller).error_size  # n joints, or a task-space law's m coordinates
+    if trajectory.n != size:
+        what = "coordinates, the hand" if controller.space == "task" else "joints, the robot"
+        raise ConfigError("trajectory", f"the trajectory has {trajectory.n} {what} {size}")
     integrator = RK4() if integrator is None else integrator
     if plant.stepped_on_host:
         integrator = host_sampling(plant, integrator)
