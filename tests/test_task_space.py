@@ -204,3 +204,21 @@ def test_a_task_run_draws_its_path_and_kinematic_estimates(tmp_path):
     lines = kinematics_figure(res).axes[0].get_lines()
     np.testing.assert_allclose(lines[0].get_ydata(), res.monitors["theta_hat"][:, 0])
     np.testing.assert_allclose(lines[1].get_ydata(), 1.0)
+
+
+def test_a_run_that_passes_near_a_singularity_says_when():
+    """A circle that reaches out to 1.99995 m of the two-link arm's 2 m: the arm nearly stretches; σ_min(J) logged,
+    metrics.json and the summary's warning name the instant. The packaged circle never comes near one."""
+    from robotadapt.analysis.metrics import SINGULAR, health_warnings
+
+    far = ra.load("task-circle-2link", ["trajectory.centre=[1.69995, 0.0]", "trajectory.radius=0.3",
+                                         "simulation.t_final=4.0"]).run()
+    m = ra.metrics(far)
+    sigma = far.monitors["hand_sigma_min"]
+    k = int(np.argmax(sigma < SINGULAR))
+    assert m["min_hand_sigma"] < SINGULAR and m["near_singularity_t"] == pytest.approx(far.t[k])
+    J = fk(far.q[k])[1]
+    assert sigma[k] == pytest.approx(np.linalg.svd(J, compute_uv=False)[-1], rel=1e-9)
+    assert any(w.startswith("singularity:") for w in health_warnings(m))
+    near = ra.metrics(ra.load("task-circle-2link", ["simulation.t_final=2.0"]).run())
+    assert near["near_singularity_t"] is None and not any(w.startswith("singularity") for w in health_warnings(near))

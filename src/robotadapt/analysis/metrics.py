@@ -93,6 +93,7 @@ def saturated_fraction(commanded: np.ndarray, applied: np.ndarray) -> float:
 #: start (and beyond ‖φ‖ when known); the same share alone is the saturation warning, the same growth alone the drift one
 WINDUP_SATURATED, WINDUP_GROWTH = 0.5, 10.0
 LYAPUNOV_GROWTH = 10.0  #: V(t_final) beyond this many times V(0): the warning that V grew where the theory has V̇ ≤ 0
+SINGULAR = 0.01  #: m/rad: σ_min of the hand's Jacobian below this, the arm passes near a singularity (a task-space law)
 
 
 def health_warnings(m: dict[str, Any]) -> list[str]:
@@ -122,6 +123,10 @@ def health_warnings(m: dict[str, Any]) -> list[str]:
             "lyapunov_not_applicable" not in m:  # a law that holds φ̂: V is no Lyapunov function of its loop
         out.append(f"Lyapunov growth: V grew from {v0:.4g} to {v1:.4g} where the theory has V̇ ≤ 0 — its assumptions fail "
                    "here (a torque limit, a disturbance, measurement noise, unmodelled dynamics, sampling)")
+    if m.get("near_singularity_t") is not None:
+        out.append(f"singularity: the hand's Jacobian fell to σ_min = {m['min_hand_sigma']:.3g} (below {SINGULAR:g}) at "
+                   f"t = {m['near_singularity_t']:.4g} s, where only the damping (controller.damping) keeps J⁺ finite — "
+                   "keep the path away from the arm's stretched or folded poses")
     return out
 
 
@@ -202,13 +207,19 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
 
 def task_metrics(res: SimulationResult, m: dict[str, Any]) -> dict[str, Any]:
     """What a task-space law's run adds (docs/task-space.md): `error_space` "task" (its e is x_d − x, metres),
-    `max_error_norm` max ‖e‖, and for a law that estimates kinematic parameters (the adaptive Jacobian) their names,
+    `max_error_norm` max ‖e‖, `min_hand_sigma` the smallest singular value of the hand's Jacobian over the logged
+    instants and `near_singularity_t` the first instant it was below :data:`SINGULAR` (None: never), and for a law that estimates kinematic parameters (the adaptive Jacobian) their names,
     `final_theta_hat` and `theta_true` (m). `task_rms_error`, `task_final_error` and `task_max_error` (m) are
     `rms_error_norm`, `final_error_norm` and `max_error_norm` of every step (:func:`metrics`)."""
     if res.space != "task":
         return {}
     out: dict[str, Any] = {"error_space": "task",
                            "max_error_norm": float(np.max(np.linalg.norm(res.e, axis=-1)))}
+    if "hand_sigma_min" in res.monitors:  # where the arm passed near a singularity (docs/task-space.md)
+        sigma = res.monitors["hand_sigma_min"]
+        near = np.flatnonzero(sigma < SINGULAR)
+        out["min_hand_sigma"] = float(sigma.min())
+        out["near_singularity_t"] = float(res.t[near[0]]) if near.size else None
     if "theta_hat" in res.monitors:
         out["kinematic_names"] = [name[len("theta_hat["):-1] for name in res.state_names if name.startswith("theta_hat[")]
         out["final_theta_hat"] = _list(res.monitors["theta_hat"][-1])

@@ -216,8 +216,9 @@ class Law(Registered, Module, ABC):
         nothing; None."""
         return None
 
-    def monitors(self, x: Array) -> dict[str, Array]:
-        """The law's own monitor series at the logged states (the composite law's λ_min(P⁻¹), (6.6.27))."""
+    def monitors(self, x: Array, q: Array) -> dict[str, Array]:
+        """The law's own monitor series at the logged states and joint angles (the composite law's λ_min(P⁻¹),
+        (6.6.27); a task-space law's σ_min(J))."""
         return {}
 
     @property

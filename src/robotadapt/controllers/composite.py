@@ -168,6 +168,6 @@ class Composite(Law):
         xp = array_namespace(x)
         return 1.0 / xp.linalg.eigvalsh(self._split(x)[1])[..., -1]
 
-    def monitors(self, x: Array) -> dict[str, Array]:
+    def monitors(self, x: Array, q: Array) -> dict[str, Array]:
         """`lambda_min_P_inv` (:meth:`lambda_min_P_inv`) at the logged states."""
         return {"lambda_min_P_inv": self.lambda_min_P_inv(x)}

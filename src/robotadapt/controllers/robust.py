@@ -133,8 +133,8 @@ class SignRobust(Law):
     def lyapunov_caveat(self) -> str | None:
         return self.base.lyapunov_caveat()
 
-    def monitors(self, x: Array) -> dict[str, Array]:
-        return self.base.monitors(x)
+    def monitors(self, x: Array, q: Array) -> dict[str, Array]:
+        return self.base.monitors(x, q)
 
     @property
     def state_names(self) -> tuple[str, ...]:

@@ -60,6 +60,12 @@ class Task(Law):
     def error_size(self) -> int:
         return len(self.model.task_axes)
 
+    def monitors(self, x: Array, q: Array) -> dict[str, Array]:
+        """`hand_sigma_min`: the smallest singular value of the hand's m×n Jacobian J(q) at the logged instants (m/rad):
+        near 0 the arm passes a singularity, where J⁺ is held finite by the damping λ only (metrics.json says when)."""
+        J = np.asarray(self.kinematics(q, np.zeros_like(q))[1])
+        return {"hand_sigma_min": np.linalg.svd(J, compute_uv=False)[..., -1]}
+
     def kinematics(self, q: Array, dq: Array) -> tuple[Array, Array, Array]:
         """(x, J, J̇): the hand's m position coordinates, their Jacobian and its derivative, `(..., m)`, `(..., m, n)`."""
         hand = self.model.hand(q, dq, self.tool)
@@ -269,10 +275,11 @@ class AdaptiveJacobian(Task):
     def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         return self._parts(x, q, dq, ref)["s"]
 
-    def monitors(self, x: Array) -> dict[str, Array]:
-        """θ̂_k and the truth it estimates at the logged states (metres; the figures and metrics.json)."""
+    def monitors(self, x: Array, q: Array) -> dict[str, Array]:
+        """σ_min of the estimated Jacobian's truth (:meth:`Task.monitors`), θ̂_k and the truth it estimates at the logged
+        states (metres; the figures and metrics.json)."""
         theta = self.theta_hat(x)
-        return {"theta_hat": theta, "theta_true": np.broadcast_to(self.theta, theta.shape)}
+        return {**super().monitors(x, q), "theta_hat": theta, "theta_true": np.broadcast_to(self.theta, theta.shape)}
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         xp = array_namespace(x, q)

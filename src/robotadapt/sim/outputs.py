@@ -167,5 +167,5 @@ def controller_series(res: SimulationResult, controller: Any, phi_t: Array | Non
             changed = np.any(before != phi_t, axis=-1)
             out["parameter_lyapunov_jump"] = np.where(changed, out["parameter_lyapunov"]
                                                       - parameter_part(V_before, before), 0.0)
-    out.update(controller.monitors(res.x))  # the law's own (least squares: λ_min(P⁻¹))
+    out.update(controller.monitors(res.x, res.q))  # the law's own (least squares: λ_min(P⁻¹); the hand's σ_min(J))
     return out
