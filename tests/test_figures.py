@@ -179,7 +179,7 @@ def test_compare_figure_gives_every_law_its_own_colour_and_dash(comparison):
                 styles.setdefault(line.get_label(), set()).add((line.get_color(), line.get_linestyle()))
     assert set(styles) == labels and all(len(s) == 1 for s in styles.values())
     pairs = [next(iter(s)) for s in styles.values()]
-    assert len(set(pairs)) == len(comparison) == len(contenders()) == 12
+    assert len(set(pairs)) == len(comparison) == len(contenders("joint")) == 12
     assert len({color for color, _ in pairs}) >= 10 and len({dash for _, dash in pairs}) >= 3
     visible = [ax for ax in fig.axes if ax.get_visible()]
     assert len(visible) >= 3 and all(len(ax.get_lines()) <= 6 for ax in visible)  # small multiples, not 12 on one

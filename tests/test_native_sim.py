@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 
+import robotadapt as ra
 from robotadapt.cli import main
 from robotadapt.controllers import InertiaRelated
 from robotadapt.native.build import compiler
@@ -92,7 +93,7 @@ def test_a_warm_process_runs_c_without_importing_jax():
 def test_a_users_class_is_part_of_the_stored_programs_key(tmp_path, monkeypatch):
     """A class from outside the package (a user's law) enters the stored key with its module's source, so an edited law
     is traced again; an object known only by its identity has no stable key (it is traced in each process)."""
-    from robotadapt.sim.driver import _stable
+    from robotadapt.sim.compiled import stable_key as _stable
 
     (tmp_path / "mylaw.py").write_text("class Law:\n    gain = 1.0\n")
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -157,3 +158,23 @@ def test_a_users_trajectory_is_fed_and_its_kind_shares_a_program():
     other = _two_link_run(sum_of_sines(2, 0.9, 2.0), "c", 1)
     assert PROGRAMS.keys() == before
     np.testing.assert_allclose(other.q_des[-1], 0.9 * np.sin(2.0 * other.t[-1]), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["example-6.3.1", "digital-6.3.1", "task-jacobian-2link"])
+def test_the_records_of_a_c_run_are_computed_in_c_and_equal_numpys(name):
+    """The logged torque, V, r, φ̂ and the reference of a C run come from a C program over the logged instants
+    (sim.compiled.native_map, `RECORD_CHUNK` at a time), equal to numpy's recomputation to round-off."""
+    from robotadapt.sim import compiled
+    from robotadapt.tracing import PROGRAMS
+
+    calls = []
+    real = compiled.native_map
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(compiled, "native_map", lambda *a, **k: calls.append(1) or real(*a, **k))
+        mp.setattr("robotadapt.sim.outputs.native_map", compiled.native_map)
+        c = ra.load(name, ['simulation.backend="c"', "simulation.t_final=3.0"]).run()
+    ref = ra.load(name, ['simulation.backend="numpy"', "simulation.t_final=3.0"]).run()
+    assert calls and any(key[0] == "records" for key in PROGRAMS.keys())
+    for field in ("tau", "V", "r", "phi_hat", "q_des", "e"):
+        a, b = getattr(c, field), getattr(ref, field)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * max(1.0, float(np.abs(b).max())), err_msg=field)

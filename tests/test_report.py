@@ -27,7 +27,7 @@ CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-back
                   "--disable-component-update", "--disable-sync", "--no-first-run")
 FIGURES = ("tracking_error.png", "parameters.png", "torques.png")
 # the lineup on Example 6.3.1: computed torque from its φ̂(0) = 0 has M̂ = 0 and is skipped (robotadapt.studies.compare)
-APPLY = list(contenders())  # every law applies: the fixed-estimate baselines hold the nominal model
+APPLY = list(contenders("joint"))  # every law applies: the fixed-estimate baselines hold the nominal model
 
 
 class Elements(HTMLParser):
@@ -127,7 +127,7 @@ def test_the_scenarios_own_controller_takes_its_place_in_the_lineup():
     own = load("problem-6.4-1", ["controller.servo={kind = 'pd', Lam = 2.5}"])
     entries, skipped = lineup(own)
     assert entries[-1].name == "scenario" and entries[-1].reference
-    assert not skipped and len(entries) == len(contenders()) + 1  # the baselines hold the true φ: M̂ = M
+    assert not skipped and len(entries) == len(contenders("joint")) + 1  # the baselines hold the true φ: M̂ = M
 
 
 def test_comparison_on_a_non_periodic_trajectory_skips_the_repetitive_law(tmp_path):
@@ -136,7 +136,7 @@ def test_comparison_on_a_non_periodic_trajectory_skips_the_repetitive_law(tmp_pa
     assert code == 0 and "Slotine–Li" in stdout
     entries, skipped = lineup(load("example-6.5.1"))
     assert "repetitive" in skipped and "periodic" in skipped["repetitive"]
-    assert set(skipped) == {"repetitive"} and len(entries) == len(contenders()) - 1
+    assert set(skipped) == {"repetitive"} and len(entries) == len(contenders("joint")) - 1
 
 
 @pytest.mark.parametrize(("argv", "field"), [

@@ -208,9 +208,10 @@ def metrics(res: SimulationResult, model: RobotModel | None = None) -> dict[str,
 def task_metrics(res: SimulationResult, m: dict[str, Any]) -> dict[str, Any]:
     """What a task-space law's run adds (docs/task-space.md): `error_space` "task" (its e is x_d − x, metres),
     `max_error_norm` max ‖e‖, `min_hand_sigma` the smallest singular value of the hand's Jacobian over the logged
-    instants and `near_singularity_t` the first instant it was below :data:`SINGULAR` (None: never), and for a law that estimates kinematic parameters (the adaptive Jacobian) their names,
-    `final_theta_hat` and `theta_true` (m). `task_rms_error`, `task_final_error` and `task_max_error` (m) are
-    `rms_error_norm`, `final_error_norm` and `max_error_norm` of every step (:func:`metrics`)."""
+    instants and `near_singularity_t` the first instant it was below :data:`SINGULAR` (None: never), and for a law
+    that estimates kinematic parameters (the adaptive Jacobian) their names, `final_theta_hat` and `theta_true` (m).
+    `task_rms_error`, `task_final_error` and `task_max_error` (m) are `rms_error_norm`, `final_error_norm` and
+    `max_error_norm` of every step (:func:`metrics`)."""
     if res.space != "task":
         return {}
     out: dict[str, Any] = {"error_space": "task",

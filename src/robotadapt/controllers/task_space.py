@@ -108,7 +108,7 @@ class TaskSlotineLi(Task, EstimateState):
     kind = "task_slotine_li"
     tuned = ("Lam", "Kv", "Gamma")
     lineup = (Contender("task_slotine_li", "task-space Slotine–Li", "Slotine & Li 1988", "task-circle-2link",
-                        {"kind": "task_slotine_li", "Lam": 5.0, "Kv": 10.0, "Gamma": 5.0}, rank=2),)
+                        {"kind": "task_slotine_li", "Lam": 5.0, "Kv": 10.0, "Gamma": 5.0}, rank=210),)
 
     model: RobotModel
     Lam: Any
@@ -181,7 +181,7 @@ class AdaptiveJacobian(Task):
     tuned = ("alpha", "Kv", "Kp", "Gamma", "Gamma_k")
     lineup = (Contender("adaptive_jacobian", "adaptive Jacobian", "Cheah, Liu & Slotine 2006", "task-jacobian-2link",
                         {"kind": "adaptive_jacobian", "alpha": 5.0, "Kv": 20.0, "Kp": 100.0, "Ks": 1.0,
-                         "Gamma": 5.0, "Gamma_k": 2.0, "theta_hat0": {"scale": 0.8}}, rank=3),)
+                         "Gamma": 5.0, "Gamma_k": 2.0, "theta_hat0": {"scale": 0.8}}, rank=220),)
 
     model: RobotModel
     alpha: Any
@@ -314,7 +314,7 @@ class OperationalSpace(Task):
     nominal = True
     tuned = ("Kp", "Kv")
     lineup = (Contender("operational_space", "operational space, fixed φ̂", "Khatib 1987", "task-circle-2link",
-                        {"kind": "operational_space", "Kp": 100.0, "Kv": 20.0}, rank=1),)
+                        {"kind": "operational_space", "Kp": 100.0, "Kv": 20.0}, rank=200),)
 
     model: RobotModel
     Kp: Any

@@ -262,6 +262,11 @@ def translate(closed: Any, name: str, arg_names: Sequence[str] | None = None,
         # a view may read an input that an output overwrites: views are stored before any output is written
         results = [translator.materialize(r) for r in translator.run(jaxpr, closed.consts, args)]
         for out, value in zip(outs, results, strict=True):  # last: an output may alias an input
+            if value.elems is not None:  # held elements (a folded constant): written one by one, no loop index
+                for i in range(out.size):
+                    em.emit(f"{out.name}[{i}] = ({out.ctype}){value.at(str(i))};")
+                continue
+
             def copy(ix: list[str], out: Ref = out, value: Ref = value) -> list[str]:
                 return [f"{out.name}[{ix[0]}] = ({out.ctype}){value.at(ix[0])};"]
 

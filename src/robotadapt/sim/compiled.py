@@ -9,6 +9,7 @@ Nothing here is a second copy of a model or a controller: the models and control
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -35,6 +36,97 @@ def compiled_map(fn: Callable[..., Any], obj: Any, static: Any, *args: Any) -> A
     except Exception as exc:  # tracing met code that needs concrete values
         raise ConfigError("simulation.backend", f"{type(exc).__name__}: {str(exc)[:120]}") from None
     return jax.tree_util.tree_map(np.asarray, out)
+
+
+RECORD_CHUNK = 2048  # logged instants per call of a native map: one program whatever the run's length
+
+
+def native_map(fn: Callable[..., dict[str, Any]], obj: Any, static: Any, samples: tuple[Any, ...]) -> dict[str, Any]:
+    """`fn(obj, static, *samples)` evaluated by C (docs/native.md): `samples` arrays with the logged instants along
+    their first axis (or None), taken `RECORD_CHUNK` at a time (the last chunk padded with its last row); `fn`
+    returns a dict of arrays (or None) with the instants first. The program is traced and built once per structure and
+    chunk shape, and found again on disk by another process (:func:`stable_key`)."""
+    from ..native import build
+
+    count = next(np.shape(a)[0] for a in samples if a is not None)
+    chunks = -(-count // RECORD_CHUNK)
+
+    def padded(a: Any) -> Any:
+        if a is None:
+            return None
+        a = np.asarray(a, dtype=float)
+        return np.concatenate([a, np.repeat(a[-1:], chunks * RECORD_CHUNK - count, axis=0)])
+
+    leaves, structure = pytree.flatten(obj)
+    whole = [padded(a) for a in samples]
+    first = tuple(None if a is None else a[:RECORD_CHUNK] for a in whole)
+    shapes = tuple(None if a is None else (np.shape(a), "f8") for a in first)
+    key = ("records", fn.__module__, fn.__qualname__, structure, static, shapes,
+           tuple((np.shape(a), np.asarray(a).dtype.str) for a in leaves))
+
+    def program(arrays: Any, *args: Any) -> tuple[Any, ...]:
+        out = fn(pytree.unflatten(structure, arrays), static, *args)
+        return tuple(out[k] for k in sorted(out) if out[k] is not None)
+
+    @float64
+    def found() -> tuple[Any, Any] | None:  # None: the maps hold host-side code (remembered, not traced again)
+        stable = stable_key(key)
+        stored = build.remembered(stable) if stable is not None else None
+        if stored is None:
+            try:
+                out = jax_module().eval_shape(lambda a, *r: fn(pytree.unflatten(structure, a), static, *r), leaves,
+                                              *first)
+                names = [k for k in sorted(out) if out[k] is not None]
+                native, layout = build.compiled(program, tuple(leaves), *first, name="records")
+            except Exception:  # tracing met code that needs concrete values, or the translator a form it lacks
+                return None
+            stored = native, (layout, names)
+            if stable is not None:
+                build.remember(stable, *stored)
+        return stored
+
+    found_program = PROGRAMS.get(("records", key), found)
+    if found_program is None:
+        raise ConfigError("simulation.backend", "the records hold code C cannot run: evaluated by numpy")
+    native, (layout, names) = found_program
+
+    def chunk(i: int) -> list[np.ndarray]:
+        rows = [a[i * RECORD_CHUNK : (i + 1) * RECORD_CHUNK] for a in whole if a is not None]
+        return native(*leaves, *rows)
+
+    parts = [chunk(i) for i in range(chunks)]
+    return {name: np.concatenate([p[layout[j]] for p in parts])[:count] for j, name in enumerate(names)}
+
+
+def stable_key(key: Any) -> str | None:
+    """`key` as text that means the same program in another process: None where it holds an object known only by its
+    identity here. A class from outside the package carries its module's source (a user's law, edited, is traced
+    again); the package's own source is in the store's fingerprint."""
+    text = repr(key)
+    if "('id', " in text:
+        return None
+    sources = []
+    for kind in sorted(_types(key), key=lambda t: f"{t.__module__}.{t.__qualname__}"):
+        if kind.__module__.split(".")[0] in ("robotadapt", "builtins", "numpy"):
+            continue
+        module = sys.modules.get(kind.__module__)
+        path = getattr(module, "__file__", None)
+        if path is None:
+            return None
+        with open(path, "rb") as f:
+            sources.append(f.read())
+    return text + repr(sources)
+
+
+def _types(key: Any) -> set[type]:
+    """The classes named in a structure."""
+    if isinstance(key, type):
+        return {key}
+    if isinstance(key, pytree.Static):
+        return _types(key.key)
+    if isinstance(key, tuple):
+        return set().union(*(_types(k) for k in key))
+    return set()
 
 
 SMALL = 8  # dot products and sums over at most this many terms are written out in the compiled step (`lean`)

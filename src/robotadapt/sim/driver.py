@@ -34,6 +34,7 @@ from ..arrays import array_namespace
 from ..tracing import PROGRAMS, float64, jax_module
 from ..validation import ConfigError
 from . import running
+from .compiled import stable_key
 from .status import Status
 
 Array = Any
@@ -257,7 +258,8 @@ def _axes(mapped: Any) -> Any:
 def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: Any, xs: Any, n: int) -> Any:
     """`make()(arrays, state, xs, n)` run as C: the program traced on these shapes, translated and built once
     (:mod:`robotadapt.native`); found again, without JAX, in this process or on disk where `static` (the program's
-    description: the transition's structure, log_every, mapping) is stable across processes (:func:`_stable`)."""
+    description: the transition's structure, log_every, mapping) is stable across processes
+    (:func:`~robotadapt.sim.compiled.stable_key`)."""
     from ..native import build
 
     leaves = [*arrays, *_flatten(state), *_flatten(xs), n]
@@ -266,7 +268,7 @@ def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: An
            tuple(np.packbits(z).tobytes() for z in zeros))
 
     def found() -> tuple[Any, Any]:
-        stable = _stable(key)
+        stable = stable_key(key)
         program = build.remembered(stable) if stable is not None else None
         if program is None:
             program = build.compiled(make(), arrays, state, xs, n, name="chunk", zeros=zeros)
@@ -279,35 +281,6 @@ def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: An
     return map_tree(lambda i: values[i], outputs)
 
 
-def _stable(key: Any) -> str | None:
-    """`key` as text that means the same program in another process: None where it holds an object known only by its
-    identity here. A class from outside the package carries its module's source (a user's law, edited, is traced
-    again); the package's own source is in the store's fingerprint."""
-    text = repr(key)
-    if "('id', " in text:
-        return None
-    sources = []
-    for kind in sorted(_types(key), key=lambda t: f"{t.__module__}.{t.__qualname__}"):
-        if kind.__module__.split(".")[0] in ("robotadapt", "builtins", "numpy"):
-            continue
-        module = sys.modules.get(kind.__module__)
-        path = getattr(module, "__file__", None)
-        if path is None:
-            return None
-        with open(path, "rb") as f:
-            sources.append(f.read())
-    return text + repr(sources)
-
-
-def _types(key: Any) -> set[type]:
-    """The classes named in a structure."""
-    if isinstance(key, type):
-        return {key}
-    if isinstance(key, pytree.Static):
-        return _types(key.key)
-    if isinstance(key, tuple):
-        return set().union(*(_types(k) for k in key))
-    return set()
 
 
 def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,

@@ -14,8 +14,9 @@ import numpy as np
 
 from ..arrays import array_namespace, matvec
 from ..trajectories import Reference, Trajectory
+from ..trajectories import traceable as is_traceable
 from ..validation import ConfigError
-from .compiled import compiled_map
+from .compiled import compiled_map, native_map
 from .loop import ClosedLoop
 from .result import SimulationResult
 from .status import Status
@@ -37,7 +38,7 @@ def outputs(loop: ClosedLoop, trajectory: Trajectory, t: Array, z: Array, status
     sample, and `monitors["phi_true"]` its history when it changed during the run (a payload attached). `folded`: the
     metrics the run folded at every step (:mod:`robotadapt.sim.running`), kept as the result's `running`.
     """
-    signals, extras = _signals(loop, trajectory, t, t, z, logged)
+    signals, extras = _signals(loop, trajectory, t, t, z, logged, native=info.get("backend") == "c")
     truth = signals.pop("truth")
     phi = None if truth is None else truth[-1] if truth.ndim == 2 else truth
     if phi is not None and loop.plant.varies:
@@ -65,18 +66,24 @@ def batch_outputs(loop: ClosedLoop, controllers: tuple[Any, ...], trajectory: Tr
 
 
 def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z: Array,
-             logged: dict[str, Array] | None) -> tuple[dict[str, Array | None], dict[str, Array]]:
+             logged: dict[str, Array] | None, native: bool = False) -> tuple[dict[str, Array | None], dict[str, Array]]:
     """The record's arrays at the logged `t` (`times`: t shaped to broadcast against the runs' axes of `z`), the
     true φ there under "truth" (None when unknown, or when the law estimates none of the plant's parameters), and
-    the extra monitor series."""
+    the extra monitor series. `native` (a run of the C backend): the reference and the maps evaluated by a C program
+    too (:func:`~robotadapt.sim.compiled.native_map`), where the models and the trajectory are array-API code."""
     ctrl, plant = loop.controller, loop.plant
     q, dq, x = loop.split(z)
-    shape = q.shape[:-1] + (ctrl.error_size,)  # the reference's: joints, or a task-space law's coordinates
-    ref = Reference(*(a if a.shape == shape else np.broadcast_to(a, shape) for a in trajectory(times)))
     extras = dict(logged or {})
     truth = plant.truth_for(ctrl.model, times)
-    args = (times, z, ref, extras.get("q_measured"), extras.get("dq_measured"), truth)
     traceable = plant.model.traceable and ctrl.model.traceable
+    if native and traceable and is_traceable(trajectory) and z.ndim == 2:
+        try:
+            return _native_signals(loop, trajectory, times, z, logged, extras, truth)
+        except ConfigError:  # host-side code in the law: numpy
+            pass
+    shape = q.shape[:-1] + (ctrl.error_size,)  # the reference's: joints, or a task-space law's coordinates
+    ref = Reference(*(a if a.shape == shape else np.broadcast_to(a, shape) for a in trajectory(times)))
+    args = (times, z, ref, extras.get("q_measured"), extras.get("dq_measured"), truth)
     if traceable and z.size // z.shape[-1] * max(ctrl.model.p, plant.model.p) >= COMPILED_OUTPUTS:
         try:
             maps = compiled_map(_maps, loop, (logged is None,), *args)
@@ -84,22 +91,52 @@ def _signals(loop: ClosedLoop, trajectory: Trajectory, t: Array, times: Array, z
             maps = _maps(loop, (logged is None,), *args)
     else:
         maps = _maps(loop, (logged is None,), *args)
+    maps = {**maps, "q_des": ref.q_des, "dq_des": ref.dq_des, "ddq_des": ref.ddq_des}
+    return _assemble(loop, z, maps, logged, extras, truth), extras
+
+
+def _assemble(loop: ClosedLoop, z: Array, maps: dict[str, Array | None], logged: dict[str, Array] | None,
+              extras: dict[str, Array], truth: Array | None) -> dict[str, Array | None]:
+    """The record's arrays from the maps at the logged instants (and `extras`, completed here); a map that is None
+    may be absent (a native program returns arrays only)."""
+    plant = loop.plant
+    q, dq, x = loop.split(z)
     if logged is None:
         tau = maps["tau"]
         if plant.actuator is not None:
             extras["tau_commanded"] = maps["commanded"]
     else:
         tau = extras.pop("tau")
-    if truth is not None and maps["phi_hat"].shape[-1] != plant.model.p:
+    phi_hat = maps["phi_hat"]
+    assert phi_hat is not None
+    if truth is not None and phi_hat.shape[-1] != plant.model.p:
         truth = None  # the law estimates no parameters of the plant's: the record has no true φ
     passivity = None
     carried = loop.passivity(z)  # integrated with the loop (ClosedLoop.monitored), not from the logged samples
     if carried is not None:
         passivity, extras["passivity_running_min"] = carried
     extras.update(plant.extra_series(z[..., : loop.m]))
-    return {"q": q, "dq": dq, "x": x, "q_des": ref.q_des, "dq_des": ref.dq_des, "ddq_des": ref.ddq_des, "tau": tau,
-            "V": maps["V"], "r": maps["r"], "phi_hat": maps["phi_hat"], "passivity": passivity, "truth": truth,
-            "errors": maps.get("errors")}, extras
+    return {"q": q, "dq": dq, "x": x, "q_des": maps["q_des"], "dq_des": maps["dq_des"], "ddq_des": maps["ddq_des"],
+            "tau": tau, "V": maps.get("V"), "r": maps.get("r"), "phi_hat": phi_hat, "passivity": passivity, "truth": truth,
+            "errors": maps.get("errors")}
+
+
+def _native_signals(loop: ClosedLoop, trajectory: Trajectory, times: Array, z: Array, logged: dict[str, Array] | None,
+                    extras: dict[str, Array], truth: Array | None) -> tuple[dict[str, Array | None], dict[str, Array]]:
+    """:func:`_signals` of one run with the reference and :func:`_maps` in C."""
+    each = None if truth is None else np.broadcast_to(truth, (times.shape[0], np.shape(truth)[-1]))
+    maps = native_map(_records, (loop, trajectory), (logged is None,),
+                      (times, z, extras.get("q_measured"), extras.get("dq_measured"), each))
+    return _assemble(loop, z, maps, logged, extras, truth), extras
+
+
+def _records(pair: tuple[ClosedLoop, Trajectory], flags: tuple[bool], times: Array, z: Array,
+             q_measured: Array | None, dq_measured: Array | None, truth: Array | None) -> dict[str, Array | None]:
+    """The reference at the logged instants and :func:`_maps` there, one program."""
+    loop, trajectory = pair
+    ref = trajectory(times)
+    out = _maps(loop, flags, times, z, ref, q_measured, dq_measured, truth)
+    return {**out, "q_des": ref.q_des, "dq_des": ref.dq_des, "ddq_des": ref.ddq_des}
 
 
 def _maps(loop: ClosedLoop, flags: tuple[bool], times: Array, z: Array, ref: Reference, q_measured: Array | None,

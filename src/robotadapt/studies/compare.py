@@ -61,9 +61,11 @@ _BOOK_PHI = (0.8, 2.3)  # the book's two-link arm, m1, m2 (kg) [BT]: the arm the
 _SHARED = ("Lam", "Kv", "Kp", "Ka", "kL", "Gamma", "Psi", "a", "P0", "K_I", "F_p", "kd")
 
 
-def contenders() -> dict[str, Contender]:
-    """The comparison's lineup: every registered law's entries (its `lineup`), by rank, then name."""
-    found = [c for law in registered("controller").values() for c in law.lineup]
+def contenders(space: str | None = None) -> dict[str, Contender]:
+    """The comparison's lineup: every registered law's entries (its `lineup`), by rank, then name; `space` ("joint",
+    "task"): only the laws whose reference lives there (`Law.space`)."""
+    found = [c for law in registered("controller").values() for c in law.lineup
+             if space is None or getattr(law, "space", "joint") == space]
     return {c.name: c for c in sorted(found, key=lambda c: (c.rank, c.name))}
 
 
@@ -354,8 +356,7 @@ def lineup(base: Scenario, names: list[str] | None = None) -> tuple[list[Entry],
     controller is the reference, in place of the lineup entry of the same kinds or as "scenario"; the other laws' gains
     and initial estimate follow the scenario (module docstring)."""
     own = base.data["controller"]
-    space = _space(own)  # the laws of the scenario's law's space: joint angles, or the hand (docs/task-space.md)
-    every = {name: c for name, c in contenders().items() if _space(c.section) == space}
+    every = contenders(_space(own))  # the laws of the scenario's law's space: joint angles, or the hand (docs/task-space.md)
     match = next((n for n, c in every.items() if _kinds(c.section) == _kinds(own)), None)
     known = list(every) + ([] if match else ["scenario"])
     for name in names or ():
