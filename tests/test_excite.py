@@ -1,19 +1,25 @@
 """Exciting trajectories (issue 27, docs/identification.md#excitation): the parametrisation starts and ends at rest, the
-JAX gradient of the objective equals central differences, the optimiser keeps every limit between its samples (checked
-on a grid of our own), lowers cond W below its start's and the scenario's own trajectory's, reads a URDF's limits, and
-`robotadapt excite` writes a trajectory a scenario runs; bad input is one line."""
+JAX gradient of the objective equals central differences (and its value the SVD's), the optimiser keeps every limit
+between its samples (checked on a grid of our own), lowers cond W below its start's and the scenario's own trajectory's,
+reads a URDF's limits, and `robotadapt excite` writes a trajectory a scenario runs; each compiled program is traced once
+a run; `--max-iter` and `--time-budget` stop the search and say so (issue 43); the figure has units and its legends
+cover no data; bad input is one line."""
 
 from __future__ import annotations
 
 import json
 
+import jax
 import numpy as np
 import pytest
 
+import robotadapt.studies.excite as excite_module
 from robotadapt.cli import main
+from robotadapt.report.identification_figures import excitation_plot
+from robotadapt.robots import TwoLinkArm
 from robotadapt.robots.identifiability import base_parameters
 from robotadapt.robots.kinematic_tree import KinematicTree
-from robotadapt.studies.excite import Design, Programs, excite, resolve_limits
+from robotadapt.studies.excite import Design, Programs, before, excite, resolve_limits, spectrum_scores, stacked_regressor
 from robotadapt.studies.scenarios import load
 from robotadapt.tracing import float64
 from test_kinematic_tree import URDF  # a two-link arm with <limit lower=-1 upper=1 effort=10 velocity=1>
@@ -45,6 +51,21 @@ def series(design: Design, x: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np
     return q, dq, ddq
 
 
+def svd_objective(model, independent: np.ndarray, design: Design, t: np.ndarray, objective: str, x: np.ndarray) -> float:
+    """The objective as defined, by numpy: log cond W or −log det WᵀW from the SVD of W."""
+    log_cond, log_det = spectrum_scores(stacked_regressor(model, independent, *design.motion(x, t)))
+    return float(log_cond if objective == "cond" else -log_det)
+
+
+def two_link_scenario(tmp_path, arm):
+    """A scenario of the two-link URDF arm (its limits: |q| ≤ 1 rad, |q̇| ≤ 1 rad/s, |τ| ≤ 10 N·m)."""
+    scenario = tmp_path / "arm.toml"
+    scenario.write_text(f'[robot]\nkind = "urdf"\npath = "{arm}"\n[plant]\nq0 = 0.0\n[trajectory]\nkind = "sinusoid"\n'
+                        'amplitude = 0.5\nomega = 1.0\n[controller]\nkind = "slotine_li"\nLam = 5.0\nKv = 2.0\n'
+                        'Gamma = 1.0\nphi_hat0 = {scale = 0.7}\n[simulation]\nt_final = 4.0\ndt = 1e-3\n')
+    return scenario
+
+
 def test_the_series_starts_and_ends_at_rest_and_is_the_one_written_out():
     design = Design(3, 4, 2.5)
     x = np.random.default_rng(0).normal(size=design.size)
@@ -70,13 +91,62 @@ def test_the_objective_and_constraint_gradients_equal_central_differences(arm):
         programs = Programs(model, design, independent, limits, design.grid(40), objective)
         f, g = programs.objective(x)
         h = 1e-6
-        fd = np.array([(programs.objective(x + h * e)[0] - programs.objective(x - h * e)[0]) / (2 * h)
+        fd = np.array([(svd_objective(model, independent, design, design.grid(40), objective, x + h * e)
+                        - svd_objective(model, independent, design, design.grid(40), objective, x - h * e)) / (2 * h)
                        for e in np.eye(design.size)])
         assert np.max(np.abs(g - fd)) < 1e-6 * max(1.0, np.max(np.abs(g)))
     J = np.asarray(programs.jacobian(x))
     fd = np.stack([(np.asarray(programs.constraints(x + h * e)) - np.asarray(programs.constraints(x - h * e))) / (2 * h)
                    for e in np.eye(design.size)], axis=1)
     assert np.max(np.abs(J - fd)) < 1e-6 * max(1.0, np.max(np.abs(J)))
+
+
+@float64
+def test_on_the_books_two_link_arm_the_jax_gradient_equals_finite_differences_and_the_value_the_svds():
+    """The two-link arm of the book (l1 = l2 = 1 m, masses m1, m2), 3 harmonics: the compiled value and gradient of each
+    objective against its definition, log cond W or −log det WᵀW by numpy's SVD of W, and that definition's central
+    differences (relative 1e-6); and the constant Jacobian of the position, velocity and acceleration rows against central
+    differences of the constraints."""
+    model = TwoLinkArm()
+    design = Design(2, 3, 2.0)
+    limits = resolve_limits(model, {"position": np.array([[-2.0, 2.0], [-1.5, 2.5]]), "velocity": np.array([3.0, 4.0]),
+                                    "acceleration": np.array([10.0, 12.0])})
+    independent = np.array(base_parameters(model).independent)
+    t = design.grid(24)
+    x = 0.3 * np.random.default_rng(2).normal(size=design.size)
+    h = 1e-6
+    for objective in ("cond", "logdet"):
+        programs = Programs(model, design, independent, limits, t, objective)
+        f, g = programs.objective(x)
+        assert f == pytest.approx(svd_objective(model, independent, design, t, objective, x), rel=1e-10)
+        fd = np.array([(svd_objective(model, independent, design, t, objective, x + h * e)
+                        - svd_objective(model, independent, design, t, objective, x - h * e)) / (2 * h)
+                       for e in np.eye(design.size)])
+        assert np.max(np.abs(g - fd)) <= 1e-6 * np.max(np.abs(g))
+    J = programs.jacobian(x)
+    fd = np.stack([(np.asarray(programs.constraints(x + h * e)) - np.asarray(programs.constraints(x - h * e))) / (2 * h)
+                   for e in np.eye(design.size)], axis=1)
+    assert J.shape == (2 * 3 * t.size * 2, design.size)
+    assert np.max(np.abs(J - fd)) <= 1e-6 * np.max(np.abs(J))
+
+
+def test_each_compiled_program_is_traced_once_a_run(arm, monkeypatch):
+    """Two starts of several SLSQP iterations each: the objective (the stacked regressor) is traced once, the inverse
+    dynamics twice (the constraints and τ's Jacobian): no program is traced again per iteration or per start."""
+    model = KinematicTree.from_urdf(arm)
+    traced = {"objective": 0, "torque": 0}
+
+    def counting(name, fn):
+        def wrapper(*args, **kwargs):
+            traced[name] += any(isinstance(a, jax.core.Tracer) for a in args)
+            return fn(*args, **kwargs)
+        return wrapper
+
+    monkeypatch.setattr(excite_module, "stacked_regressor", counting("objective", stacked_regressor))
+    monkeypatch.setattr(KinematicTree, "inverse_dynamics", counting("torque", KinematicTree.inverse_dynamics))
+    result = excite(model, Design(2, 3, 4.0), resolve_limits(model, {}), samples=40, starts=2, max_iter=30)
+    assert len(result.iterations) == 2 and sum(result.iterations) >= 10
+    assert traced == {"objective": 1, "torque": 2}
 
 
 def test_the_optimum_keeps_every_limit_between_samples_and_beats_its_start(arm):
@@ -112,10 +182,7 @@ def test_the_panda_limits_come_from_its_urdf():
 
 
 def test_excite_writes_a_trajectory_a_scenario_runs(tmp_path, arm, capsys):
-    scenario = tmp_path / "arm.toml"
-    scenario.write_text(f'[robot]\nkind = "urdf"\npath = "{arm}"\n[plant]\nq0 = 0.0\n[trajectory]\nkind = "sinusoid"\n'
-                        'amplitude = 0.5\nomega = 1.0\n[controller]\nkind = "slotine_li"\nLam = 5.0\nKv = 2.0\n'
-                        'Gamma = 1.0\nphi_hat0 = {scale = 0.7}\n[simulation]\nt_final = 4.0\ndt = 1e-3\n')
+    scenario = two_link_scenario(tmp_path, arm)
     out = tmp_path / "ex"
     assert main(["excite", str(scenario), "--harmonics", "3", "--period", "4", "--starts", "1", "--samples", "40",
                  "--acceleration-limit", "4,4", "--out", str(out)]) == 0
@@ -132,11 +199,64 @@ def test_excite_writes_a_trajectory_a_scenario_runs(tmp_path, arm, capsys):
     assert main(["run", str(out / "scenario.toml"), "--no-plots", "--t-final", "0.5", "--out", str(tmp_path / "r")]) == 0
 
 
+def test_max_iter_1_stops_every_start_after_one_iteration_and_says_so(tmp_path, arm, capsys):
+    out = tmp_path / "ex"
+    assert main(["excite", str(two_link_scenario(tmp_path, arm)), "--harmonics", "3", "--period", "4", "--starts", "2",
+                 "--samples", "40", "--max-iter", "1", "--no-plots", "--out", str(out)]) == 0
+    record = json.loads((out / "excite.json").read_text())
+    assert record["iterations"] == [1, 1] and record["max_iter"] == 1
+    assert record["stopped"] == "iteration cap 1" and record["exits"] == ["Iteration limit reached"] * 2
+    assert record["limits_met"]
+    printed = capsys.readouterr()
+    assert "stopped: iteration cap 1" in printed.out
+    assert printed.err == ""  # no progress bar when stderr is not a terminal
+
+
+def test_the_time_budget_stops_the_search_at_its_best_feasible_point_and_says_so(tmp_path, arm, capsys):
+    """A budget spent before the first iteration ends (the compilation alone takes longer): the first start's run
+    stops after one iteration, no other start begins, and what is kept is feasible and no worse than the start."""
+    out = tmp_path / "ex"
+    assert main(["excite", str(two_link_scenario(tmp_path, arm)), "--harmonics", "3", "--period", "4", "--starts", "3",
+                 "--samples", "40", "--time-budget", "0.001", "--no-plots", "--out", str(out)]) == 0
+    record = json.loads((out / "excite.json").read_text())
+    assert record["stopped"] == "time budget 0.001 s" and record["time_budget"] == 0.001
+    assert record["iterations"] == [1] and record["starts_run"] == 1 and record["starts"] == 3
+    assert record["exits"] == ["time budget"]
+    assert record["final_objectives"][0] <= record["start_objectives"][0] and record["limits_met"]
+    assert "stopped: time budget 0.001 s (1 of 3 starts, iterations 1)" in capsys.readouterr().out
+
+
+@float64
+def test_the_figure_gives_units_and_its_legends_cover_no_data(arm):
+    """The unbounded acceleration of the URDF arm in rad/s², the bounds in rad, rad/s and N·m; each legend's box
+    outside every axes' box."""
+    model = KinematicTree.from_urdf(arm)
+    limits = resolve_limits(model, {})
+    design = Design(2, 3, 4.0)
+    result = excite(model, design, limits, samples=40, starts=1, max_iter=5)
+    from robotadapt.trajectories import sinusoid
+
+    old = sinusoid(2)
+    fig = excitation_plot(model, result, old, before(model, old, 4.0, design, 40, limits))
+    axes = fig.axes
+    assert axes[2].get_ylabel() == r"$\ddot q$ (rad/s²)"
+    assert "rad" in axes[0].get_title() and "rad/s" in axes[1].get_title() and "N·m" in axes[3].get_title()
+    renderer = fig.canvas.get_renderer()
+    legends = [ax.get_legend() for ax in axes if ax.get_legend() is not None]
+    assert len(legends) == 2
+    for box in (lg.get_window_extent(renderer) for lg in legends):
+        assert not any(box.overlaps(ax.get_window_extent(renderer)) for ax in axes)
+
+
 @pytest.mark.parametrize("args, words", [
     (["--harmonics", "1"], "--harmonics: expected a whole number ≥ 2"),
     (["--velocity-limit", "1,2,3"], "--velocity-limit: expected one value or 2"),
     (["--position-limit", "1:-1"], "--position-limit: expected X > 0 or LO:HI"),
     ([], "--position-limit: the model has no joint limits"),
+    *[(["--max-iter", bad], "--max-iter: expected a whole number of iterations ≥ 1, e.g. --max-iter 100")
+      for bad in ("0", "-3", "2.5", "many")],
+    *[(["--time-budget", bad], "--time-budget: expected a positive number of seconds, e.g. --time-budget 60")
+      for bad in ("0", "-5", "soon", "inf", "nan")],
 ])
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, args, words):
     out = tmp_path / "out"

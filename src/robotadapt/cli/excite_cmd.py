@@ -28,6 +28,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "evaluated at (default 20 per harmonic, at least 4 equations per base parameter)")
     p.add_argument("--starts", type=int, default=3, metavar="S", help="random feasible starts (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random starts (default 0)")
+    p.add_argument("--max-iter", metavar="N", help="most SLSQP iterations per start (default 300)")
+    p.add_argument("--time-budget", metavar="SECONDS", help="stop the search when this many seconds have passed since "
+                   "it began (compilation included) and keep the best feasible point found so far; excite.json's "
+                   "`stopped` says so (default: no limit)")
     p.add_argument("--fraction", type=float, default=0.9, metavar="F",
                    help="use this fraction of every limit, a margin for what the model misses (default 0.9)")
     p.add_argument("--position-limit", metavar="SPEC",
@@ -63,12 +67,39 @@ def limit_spec(text: str | None, n: int, option: str, position: bool = False) ->
     return values if position else values[:, 0]
 
 
+def max_iter(text: str | None) -> int | None:
+    """`--max-iter`: a whole number ≥ 1, or None (the library's default)."""
+    if text is None:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise ConfigError("--max-iter", f"expected a whole number of iterations ≥ 1, e.g. --max-iter 100; got {text!r}")
+    return value
+
+
+def time_budget(text: str | None) -> float | None:
+    """`--time-budget`: a positive finite number of seconds, or None."""
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value < float("inf"):
+        raise ConfigError("--time-budget", f"expected a positive number of seconds, e.g. --time-budget 60; got {text!r}")
+    return value
+
+
 def main(args: argparse.Namespace) -> int:
     from ..files import atomic_write, writable_dir
     from ..studies.excite import Design, before, excite, resolve_limits
     from ..studies.scenarios import load
 
     output = figure_format(args)
+    iterations, budget = max_iter(args.max_iter), time_budget(args.time_budget)
     scenario = load(args.scenario, list(args.set))
     s = scenario.setup
     model = s.controller.model
@@ -79,7 +110,8 @@ def main(args: argparse.Namespace) -> int:
     limits = resolve_limits(model, given, args.fraction,
                             "urdf" if scenario.data["robot"].get("kind") in ("urdf", "example_robot") else "model")
     design = Design(n, args.harmonics, args.period)
-    result = excite(model, design, limits, args.objective, args.samples, args.starts, np.random.default_rng(args.seed))
+    result = excite(model, design, limits, args.objective, args.samples, args.starts, np.random.default_rng(args.seed),
+                    time_budget=budget, progress=True, **({} if iterations is None else {"max_iter": iterations}))
     old = before(model, s.trajectory, s.t_final, design, result.samples, limits)
     a, b, offset = design.coefficients(result.x)
     table = {"kind": "fourier", "period": design.period, "a": a.tolist(), "b": b.tolist(), "offset": offset.tolist()}
@@ -108,7 +140,10 @@ def _summary(record: dict[str, Any]) -> str:
     ratios = ", ".join(f"{k} {v:.3g}" for k, v in record["worst_ratio"].items() if v is not None)
     old = record["before"]
     met = "meets" if old["limits_met"] else "does not meet"
+    runs = f"{record['starts_run']} of {record['starts']} starts" if record["starts_run"] < record["starts"] else (
+        f"{record['starts']} start{'s' * (record['starts'] > 1)}")
     return (f"{record['scenario']}: cond W {old['cond']:.4g} (the scenario's own trajectory, which {met} the same limits)"
             f" → {record['cond_after']:.4g} ({record['objective']} objective, {record['harmonics']} harmonics, T = "
             f"{record['period']:g} s, {record['samples']} samples, {record['seconds']:.1f} s); limits "
-            f"{'met' if record['limits_met'] else 'NOT met'}, largest share of each bound used: {ratios}")
+            f"{'met' if record['limits_met'] else 'NOT met'}, largest share of each bound used: {ratios}; SLSQP "
+            f"stopped: {record['stopped']} ({runs}, iterations {', '.join(map(str, record['iterations']))})")

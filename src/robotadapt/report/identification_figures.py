@@ -73,32 +73,50 @@ def validation_figure(result: Identification, path: Path, title: str = "", outpu
 def excitation_plot(model: RobotModel, result: Excitation, old: Trajectory, compared: dict[str, Any],
                     title: str = "") -> Figure:
     """Over one period on the check's fine grid: each joint's position, velocity, acceleration and torque (at the
-    nominal φ) as a share of its bound (±1 dashed; a kind without bounds is drawn in its own units), and the singular
-    values of the stacked base regressor W of `model` on the optimised trajectory against the scenario's own (`old`, on
-    the grid of `compared`, :func:`~robotadapt.studies.excite.before`'s record)."""
+    nominal φ) as a share of its bound (±1 dashed; the bounds in their units in each panel's title; a kind without
+    bounds is drawn in its own units: rad, rad/s, rad/s², N·m at revolute joints, m, m/s, m/s², N at prismatic ones),
+    and the singular values of the stacked base regressor W of `model` on the optimised trajectory against the
+    scenario's own (`old`, on the grid of `compared`, :func:`~robotadapt.studies.excite.before`'s record). The legends
+    sit outside the axes, right of them."""
+    from .figures import EFFORT, POSITION, joint_types, legend
+
     fine, limits = result.fine, result.limits
+    types = set(joint_types(model) or "?")
+    joints = types.pop() if len(types) == 1 else "?"  # "R", "P", or "?" for mixed or unknown joints
+    tables = {"position": POSITION, "velocity": {"R": "rad/s", "P": "m/s", "?": "rad/s or m/s"},
+              "acceleration": {"R": "rad/s²", "P": "m/s²", "?": "rad/s² or m/s²"}, "torque": EFFORT}
+    units = {kind: table[joints] for kind, table in tables.items()}
+
+    def spread(bound: Any, unit: str) -> str:
+        lo, hi = float(np.min(bound)), float(np.max(bound))
+        return f"{lo:.3g} {unit}" if np.isclose(lo, hi) else f"{lo:.3g}–{hi:.3g} {unit}"
+
     mid, half = 0.5 * (limits.upper + limits.lower), 0.5 * (limits.upper - limits.lower)
-    rows = [("position", (fine.q - mid) / half, "$(q - q_{mid})/$half range")]
+    rows = [("position", (fine.q - mid) / half, "$(q - q_{mid})$ / half range",
+             f"position: share of the half range {spread(half, units['position'])} about the middle")]
     for kind, value, symbol in (("velocity", fine.dq, r"\dot q"), ("acceleration", fine.ddq, r"\ddot q"),
                                 ("torque", fine.tau, r"\tau")):
         if value is None:
             continue
         bound = limits.bound(kind)
-        bounded = bool(np.all(np.isfinite(bound)))
-        rows.append((kind, value / bound if bounded else value, f"${symbol}$" + (" / bound" if bounded else "")))
-    fig = new_figure(figsize=(8, 1.9 * len(rows) + 2.6))
+        if np.all(np.isfinite(bound)):
+            rows.append((kind, value / bound, f"${symbol} / {symbol}_{{max}}$",
+                         f"{kind}: share of the bound {spread(bound, units[kind])}"))
+        else:
+            rows.append((kind, value, f"${symbol}$ ({units[kind]})", f"{kind} (no bound)"))
+    fig = new_figure(figsize=(9.5, 1.9 * len(rows) + 2.6))
     axes = fig.subplots(len(rows) + 1, 1)
-    for ax, (kind, value, label) in zip(axes, rows, strict=False):
+    for ax, (kind, value, label, heading) in zip(axes, rows, strict=False):
         for i in range(value.shape[1]):
             ax.plot(fine.t, value[:, i], linewidth=1.0, label=f"joint {i + 1}")
         if kind == "position" or np.all(np.isfinite(limits.bound(kind))):
             for y in (-1.0, 1.0):
                 ax.axhline(y, color="k", linestyle="--", linewidth=0.8)
+            heading += f"; largest share {fine.ratio[kind]:.3g}"
         ax.set_ylabel(label)
-        ax.set_title(f"{kind}: largest share of its bound {fine.ratio[kind]:.3g}" if not np.isnan(fine.ratio[kind])
-                     else f"{kind} (no bound)", fontsize="small")
+        ax.set_title(heading, fontsize="small")
         ax.grid(True, alpha=0.3)
-    axes[0].legend(loc="upper right", fontsize="x-small", ncol=min(result.design.n, 4))
+    legend(axes[0])
     axes[len(rows) - 1].set_xlabel("time $t$ (s), one period")
     independent = np.array(base_parameters(model).independent)
     new_ref = result.trajectory()(result.design.grid(result.samples))
@@ -107,11 +125,11 @@ def excitation_plot(model: RobotModel, result: Excitation, old: Trajectory, comp
     for name, ref, style in (("optimised", new_ref, "o-"), ("scenario's own", old_ref, "s--")):
         W = stacked_regressor(model, independent, ref.q_des, ref.dq_des, ref.ddq_des)
         sv = np.linalg.svd(W / np.sqrt(len(ref.q_des)), compute_uv=False)
-        ax.semilogy(np.arange(1, sv.size + 1), sv, style, markersize=3, label=f"{name}: cond W = {sv[0] / sv[-1]:.4g}")
+        ax.semilogy(np.arange(1, sv.size + 1), sv, style, markersize=3, label=f"{name}:\ncond W = {sv[0] / sv[-1]:.4g}")
     ax.set_xlabel("index of the singular value")
-    ax.set_ylabel(r"$\sigma_k(W)/\sqrt{N}$")
+    ax.set_ylabel(r"$\sigma_k(W)/\sqrt{N}$ (SI units)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize="small")
+    legend(ax)
     fig.suptitle(f"{title}: exciting trajectory ({result.objective} objective)".lstrip(": "))
     fig.tight_layout()
     return fig

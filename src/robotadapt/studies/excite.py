@@ -9,8 +9,7 @@ It starts (and, being periodic, ends) at rest by construction: q̇_i(0) = Σ_l a
 are solved for a_iK and b_iK, so the design vector x holds a_il, b_il for l < K and q_i0, n(2K − 1) numbers.
 
 Objective, on N samples t_j = j T/N of one period: the stacked base regressor W = [Y_b(q_d, q̇_d, q̇_d, q̈_d)(t_j)]
-((N n) × b, SI units; :mod:`robotadapt.robots.identifiability`) and its singular values σ (of W itself, not of WᵀW,
-which would square the condition number):
+((N n) × b, SI units; :mod:`robotadapt.robots.identifiability`) and its singular values σ:
 
 - `cond` (default): minimise log cond W = log σ_max − log σ_min. The least-squares estimate's relative error is
   bounded by cond W times the relative torque noise, and the identification papers (Gautier & Khalil 1992, Swevers
@@ -18,18 +17,30 @@ which would square the condition number):
 - `logdet`: maximise log det WᵀW = 2 Σ log σ (D-optimality), invariant to the parameters' units and to the choice of
   base parameters up to a constant, but it may buy a large det with one weak direction left.
 
+The optimiser takes σ² as the eigenvalues λ of the b × b Gram matrix WᵀW (:func:`gram_scores`): the same objective, the
+condition number of W (log cond W = ½ log λ_max/λ_min), from a small symmetric eigenproblem rather than the SVD of the
+tall W, whose LAPACK call runs on OpenBLAS's threads, which stall when other jobs share the cores (the Panda's value
+and gradient through the SVD took 7–86 ms a call on a busy 2-core machine, 3 ms with one BLAS thread; through WᵀW,
+2 ms). λ_min is then accurate to about ε λ_max: its relative error ε cond²W is 1e-8 at cond W = 1e4, the gradient's
+likewise, far finer than the optimiser needs. What is reported (:func:`score`) is the SVD of W.
+
 Constraints, on the same samples, each normalised to ≤ 1: the position inside [lower, upper], |q̇| ≤ q̇_max,
 |q̈| ≤ q̈_max and |τ| ≤ τ_max, τ the inverse dynamics at the model's nominal parameters (`default_phi`, the prior a user
-has), each sample and joint a row (the first three are linear in x). SLSQP minimises with the JAX gradient and
-Jacobian (compiled once, shared by the `starts` random feasible starts: random coefficients scaled by bisection to
-`START_SHARE` of the largest feasible size, about the middle of the position range). The best feasible result is then
-checked on a grid `FINE` times denser; where it leaves a limit between the samples its coefficients are scaled down
-(q − q_0, q̇ and q̈ scale with them) by bisection until the fine grid is inside, and what is reported is what the fine
-grid shows.
+has), each sample and joint a row. The first three are linear in x, so their Jacobian is a constant; τ's Jacobian is
+∂τ/∂(q, q̇, q̈) at each sample (3n forward derivatives over all the samples at once: a sample's τ depends on its own
+state only) times the constant ∂(q, q̇, q̈)/∂x. SLSQP minimises with the JAX gradient and that exact Jacobian
+(compiled once, shared by the `starts` random feasible starts: random coefficients scaled by bisection to
+`START_SHARE` of the largest feasible size, about the middle of the position range), at most `max_iter` iterations a
+start and, with a `time_budget`, no start begun and no iteration begun after it: a run it cuts ends at its best
+feasible point so far (its start, or an iterate). Of the runs' end points the best feasible one is kept (the lowest
+objective; of infeasible ones only when none is feasible). It is then checked on a grid `FINE` times denser; where it
+leaves a limit between the samples its coefficients are scaled down (q − q_0, q̇ and q̈ scale with them) by bisection
+until the fine grid is inside, and what is reported is what the fine grid shows.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -52,6 +63,7 @@ START_SHARE = 0.7  # a start is this share of the largest feasible scaling of it
 MAXITER = 300
 FTOL = 1e-10
 FEASIBLE = 1e-6  # a sampled constraint counts as met up to this (normalised) violation
+CAPPED = 9  # SLSQP's exit mode at its iteration cap
 
 
 @dataclass(frozen=True, eq=False)
@@ -186,6 +198,12 @@ def spectrum_scores(W: Array, xp: Any = np) -> tuple[Array, Array]:
     return xp.log(s[0]) - xp.log(s[-1]), 2 * xp.sum(xp.log(s))
 
 
+def gram_scores(W: Array, xp: Any = np) -> tuple[Array, Array]:
+    """(log cond W, log det WᵀW) from the eigenvalues of WᵀW, the squared singular values of W (module docstring)."""
+    lam = xp.linalg.eigvalsh(W.T @ W)
+    return 0.5 * (xp.log(lam[-1]) - xp.log(lam[0])), xp.sum(xp.log(lam))
+
+
 @dataclass(frozen=True, eq=False)
 class Envelope:
     """A trajectory on a grid `t` with the inverse dynamics at the nominal φ (`tau`, None without one), the extremes
@@ -233,7 +251,7 @@ def score(model: RobotModel, independent: Array, trajectory: Trajectory, t: Arra
 
 class Programs:
     """The compiled objective (value and gradient) and constraints (values ≥ 0 and Jacobian) of one design, shared by
-    every start. Call within :func:`~robotadapt.sim.compiled.float64`."""
+    every start; each traced and compiled once. Call within :func:`~robotadapt.tracing.float64`."""
 
     def __init__(self, model: RobotModel, design: Design, independent: Array, limits: Limits, t: Array,
                  objective: str) -> None:
@@ -242,26 +260,53 @@ class Programs:
         phi = model.default_phi
         mid, half = 0.5 * (limits.upper + limits.lower), 0.5 * (limits.upper - limits.lower)
         kinds = [k for k in KINDS[1:] if np.all(np.isfinite(limits.bound(k)))]
+        torque = "torque" in kinds
+        n = design.n
+        # ∂(q, q̇, q̈)/∂x at each sample, (m, 3n, size): the motion is linear in x, its columns its values at each e_k
+        motion = np.stack([np.concat(design.motion(e, t), axis=1) for e in np.eye(design.size)], axis=-1)
+        scale = {"velocity": 1, "acceleration": 2}
+        linear = [motion[:, :n] / half[:, None]] + [motion[:, scale[k] * n : (scale[k] + 1) * n]
+                                                     / limits.bound(k)[:, None] for k in kinds if k != "torque"]
+        self.linear_jacobian = np.concat([d.reshape(-1, design.size) for d in linear])
 
         def value(x: Array) -> Array:
-            log_cond, log_det = spectrum_scores(stacked_regressor(model, independent, *design.motion(x, t, jnp)), jnp)
+            log_cond, log_det = gram_scores(stacked_regressor(model, independent, *design.motion(x, t, jnp)), jnp)
             return log_cond if objective == "cond" else -log_det
 
         def constraints(x: Array) -> Array:
             q, dq, ddq = design.motion(x, t, jnp)
             values = {"velocity": dq, "acceleration": ddq}
-            if "torque" in kinds:
+            if torque:
                 values["torque"] = model.inverse_dynamics(q, dq, ddq, phi)
             rows = [(q - mid) / half] + [values[k] / limits.bound(k) for k in kinds]
             return 1.0 - jnp.concat([jnp.ravel(r) for r in rows] + [-jnp.ravel(r) for r in rows])
 
+        def torque_jacobian(x: Array) -> Array:
+            """∂(τ/τ_max)/∂x, (m n, size)."""
+            state = design.motion(x, t, jnp)
+
+            def column(e: Array) -> Array:  # ∂τ_j/∂s_jc at every sample j for one state coordinate c
+                tangents = tuple(jnp.broadcast_to(e[i], s.shape) for i, s in enumerate(state))
+                return jax.jvp(lambda q, dq, ddq: model.inverse_dynamics(q, dq, ddq, phi), state, tangents)[1]
+
+            partial = jax.vmap(column)(jnp.eye(3 * n).reshape(3 * n, 3, n))  # (3n, m, n)
+            return (jnp.einsum("cji,jcx->jix", partial, motion) / limits.torque[:, None]).reshape(-1, design.size)
+
         self.value_and_grad = jax.jit(jax.value_and_grad(value))
         self.constraints = jax.jit(constraints)
-        self.jacobian = jax.jit(jax.jacfwd(constraints))
+        self.torque_jacobian = jax.jit(torque_jacobian) if torque else None
 
     def objective(self, x: Array) -> tuple[float, Array]:
         f, g = self.value_and_grad(x)
         return float(f), np.asarray(g)
+
+    def jacobian(self, x: Array) -> Array:
+        """The Jacobian of the constraints 1 − (ρ, −ρ): (−∂ρ/∂x, ∂ρ/∂x), ρ the normalised rows (position, velocity
+        and acceleration, constant, then τ's)."""
+        J = self.linear_jacobian
+        if self.torque_jacobian is not None:
+            J = np.concat([J, np.asarray(self.torque_jacobian(x))])
+        return np.concat([-J, J])
 
     def feasible(self, x: Array) -> bool:
         return bool(np.min(np.asarray(self.constraints(x))) >= -FEASIBLE)
@@ -296,12 +341,55 @@ def _start(design: Design, programs: Programs, limits: Limits, rng: np.random.Ge
     return _scaled(design, x, START_SHARE * s)
 
 
+class _Search:
+    """The optimiser's runs, one per start: the best feasible point of the current run, each run's iterations, the
+    progress bar and the time budget (:meth:`step`, SLSQP's callback, ends a run by StopIteration once the `deadline`
+    has passed)."""
+
+    def __init__(self, programs: Programs, starts: int, deadline: float, bar: Any) -> None:
+        self.programs, self.starts, self.deadline, self.bar = programs, starts, deadline, bar
+        self.best_objective = np.inf
+        self.best: Array | None = None
+        self.iterations: list[int] = []
+        self.out_of_time = False
+
+    def offer(self, x: Array, objective: float) -> None:
+        """Keep `x` if it is feasible and better than the run's best so far."""
+        if objective < self.best_objective and self.programs.feasible(x):
+            self.best_objective, self.best = objective, np.array(x)
+
+    def begin(self, x0: Array, objective: float) -> None:
+        """A new run from `x0`."""
+        self.iterations.append(0)
+        self.best_objective, self.best = np.inf, None
+        self.offer(x0, objective)
+        self.bar.set_postfix_str(f"start {len(self.iterations)}/{self.starts}, objective {objective:.4g}")
+
+    def step(self, intermediate_result: Any) -> None:
+        """After each SLSQP iteration."""
+        self.iterations[-1] += 1
+        objective = float(intermediate_result.fun)
+        self.offer(intermediate_result.x, objective)
+        self.bar.update()
+        self.bar.set_postfix_str(f"start {len(self.iterations)}/{self.starts}, objective {objective:.4g}, best "
+                                 f"{self.best_objective:.4g}")
+        if self.over():
+            raise StopIteration
+
+    def over(self) -> bool:
+        """Whether the time budget is spent (and remember that it cut the search)."""
+        self.out_of_time = self.out_of_time or time.perf_counter() > self.deadline
+        return self.out_of_time
+
+
 @dataclass(frozen=True, eq=False)
 class Excitation:
     """The optimised trajectory (`x`, `design`; :meth:`trajectory`) with its scores on the `samples` grid (`cond`,
     `log_det`), its `fine` :class:`Envelope` (what `limits` it meets), `scale` the factor the coefficients were scaled
-    down by to meet them between the samples (1: not needed), per start the optimiser's `iterations` and its objective
-    at the start and at the end, and `seconds` taken."""
+    down by to meet them between the samples (1: not needed), per start run the optimiser's `iterations`, its objective
+    at the start and at the end and its `exits` (SLSQP's message, or the time budget's), of `starts` asked for, with at
+    most `max_iter` iterations each within `time_budget` s (None: none); `stopped` says what ended the search
+    ("converged", "iteration cap N", "time budget T s" or SLSQP's message); `seconds` taken."""
 
     design: Design
     x: Array
@@ -315,6 +403,11 @@ class Excitation:
     iterations: tuple[int, ...]
     start_objectives: tuple[float, ...]
     final_objectives: tuple[float, ...]
+    exits: tuple[str, ...]
+    starts: int
+    max_iter: int
+    time_budget: float | None
+    stopped: str
     seconds: float
 
     def trajectory(self) -> SumOfSines:
@@ -326,9 +419,10 @@ class Excitation:
                 "samples": self.samples, "a": a.tolist(), "b": b.tolist(), "offset": offset.tolist(),
                 "q0": self.trajectory()(0.0).q_des.tolist(), "cond": self.cond, "log_det": self.log_det,
                 **self.fine.as_dict(), "fine_samples": int(self.fine.t.size), "scale": self.scale,
-                "iterations": list(self.iterations), "start_objectives": list(self.start_objectives),
-                "final_objectives": list(self.final_objectives),
-                "seconds": self.seconds}
+                "stopped": self.stopped, "starts": self.starts, "starts_run": len(self.iterations),
+                "max_iter": self.max_iter, "time_budget": self.time_budget, "iterations": list(self.iterations),
+                "exits": list(self.exits), "start_objectives": list(self.start_objectives),
+                "final_objectives": list(self.final_objectives), "seconds": self.seconds}
 
 
 def default_samples(design: Design, base_count: int) -> int:
@@ -337,18 +431,37 @@ def default_samples(design: Design, base_count: int) -> int:
     return max(SAMPLES_PER_HARMONIC * design.harmonics, -(-ROWS_PER_PARAMETER * base_count // design.n))
 
 
+def _stopped(exits: list[tuple[int, str]], out_of_time: bool, max_iter: int, time_budget: float | None) -> str:
+    """What ended the search, from each run's (SLSQP exit mode, message)."""
+    if out_of_time:
+        return f"time budget {time_budget:g} s"
+    if any(mode == CAPPED for mode, _ in exits):
+        return f"iteration cap {max_iter}"
+    return next((f"SLSQP: {message}" for mode, message in exits if mode != 0), "converged")
+
+
 @float64
 def excite(model: RobotModel, design: Design, limits: Limits, objective: str = "cond", samples: int | None = None,
-           starts: int = 3, rng: np.random.Generator | None = None) -> Excitation:
-    """The exciting trajectory of the module docstring for `model`: `starts` SLSQP runs from random feasible starts
-    drawn from `rng` (default seed 0), the best kept, checked and scaled on the fine grid."""
+           starts: int = 3, rng: np.random.Generator | None = None, max_iter: int = MAXITER,
+           time_budget: float | None = None, progress: bool = False) -> Excitation:
+    """The exciting trajectory of the module docstring for `model`: `starts` SLSQP runs of at most `max_iter`
+    iterations from random feasible starts drawn from `rng` (default seed 0), within `time_budget` seconds (None: no
+    limit), the best feasible point kept, checked and scaled on the fine grid. `progress`: a progress bar on stderr
+    when it is a terminal."""
     import scipy.optimize
+    from threadpoolctl import threadpool_limits
+    from tqdm import tqdm
 
     clock = time.perf_counter()
     if objective not in OBJECTIVES:
         raise ConfigError("--objective", f"expected one of {', '.join(OBJECTIVES)}, got {objective!r}")
     if isinstance(starts, bool) or not isinstance(starts, int) or starts < 1:
         raise ConfigError("--starts", f"expected a whole number ≥ 1, got {starts!r}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
+        raise ConfigError("--max-iter", f"expected a whole number ≥ 1 of SLSQP iterations per start, got {max_iter!r}")
+    if time_budget is not None and (isinstance(time_budget, bool) or not isinstance(time_budget, int | float)
+                                    or not 0 < time_budget < np.inf):
+        raise ConfigError("--time-budget", f"expected a positive number of seconds, got {time_budget!r}")
     independent = np.array(base_parameters(model).independent)
     b = independent.size
     samples = default_samples(design, b) if samples is None else samples
@@ -356,16 +469,28 @@ def excite(model: RobotModel, design: Design, limits: Limits, objective: str = "
         raise ConfigError("--samples", f"expected a whole number with samples × {design.n} joints ≥ the {b} base "
                           f"parameters (at least {-(-b // design.n)}), got {samples!r}")
     rng = np.random.default_rng(0) if rng is None else rng
-    programs = Programs(model, design, independent, limits, design.grid(samples), objective)
-    bounds = {"type": "ineq", "fun": lambda x: np.asarray(programs.constraints(x)),
-              "jac": lambda x: np.asarray(programs.jacobian(x))}
-    runs = []
-    for _ in range(starts):
-        x0 = _start(design, programs, limits, rng)
-        res = scipy.optimize.minimize(programs.objective, x0, jac=True, method="SLSQP", constraints=[bounds],
-                                      options={"maxiter": MAXITER, "ftol": FTOL})
-        runs.append((not programs.feasible(res.x), float(res.fun), int(res.nit), res.x, programs.objective(x0)[0]))
-    x = min(runs, key=lambda r: (r[0], r[1]))[3]  # feasible first, then the lowest objective
+    quiet = not (progress and sys.stderr.isatty())  # as `robotadapt tune`: a progress bar on a terminal only
+    # one BLAS thread: SLSQP's and the Gram matrix's calls are small, and OpenBLAS's pool stalls them beside another job
+    with tqdm(total=starts * max_iter, disable=quiet, unit="it", file=sys.stderr, leave=False) as bar, \
+            threadpool_limits(1, "blas"):
+        bar.set_postfix_str("compiling")
+        programs = Programs(model, design, independent, limits, design.grid(samples), objective)
+        bounds = {"type": "ineq", "fun": lambda x: np.asarray(programs.constraints(x)), "jac": programs.jacobian}
+        search = _Search(programs, starts, np.inf if time_budget is None else clock + time_budget, bar)
+        runs: list[tuple[bool, float, Array, float, tuple[int, str]]] = []
+        while len(runs) < starts and not (runs and search.over()):
+            x0 = _start(design, programs, limits, rng)
+            f0 = programs.objective(x0)[0]
+            search.begin(x0, f0)
+            res = scipy.optimize.minimize(programs.objective, x0, jac=True, method="SLSQP", constraints=[bounds],
+                                          callback=search.step, options={"maxiter": max_iter, "ftol": FTOL})
+            x, f = res.x, float(res.fun)
+            if search.out_of_time and search.best is not None:  # cut by the budget: the run's best feasible point
+                x, f = search.best, search.best_objective
+            bar.update(max_iter - search.iterations[-1])
+            exit_message = "time budget" if search.out_of_time else str(res.message)
+            runs.append((not programs.feasible(x), f, x, f0, (int(res.status), exit_message)))
+    x = min(runs, key=lambda r: (r[0], r[1]))[2]  # feasible first, then the lowest objective
     fine_t = design.grid(FINE * samples)
     fine = envelope(model, design.trajectory(x), fine_t, limits)
     scale = 1.0
@@ -376,8 +501,11 @@ def excite(model: RobotModel, design: Design, limits: Limits, objective: str = "
             x = _scaled(design, x, scale)
             fine = envelope(model, design.trajectory(x), fine_t, limits)
     cond, log_det = score(model, independent, design.trajectory(x), design.grid(samples))
-    return Excitation(design, x, objective, samples, cond, log_det, limits, fine, scale, tuple(r[2] for r in runs),
-                      tuple(r[4] for r in runs), tuple(r[1] for r in runs), time.perf_counter() - clock)
+    return Excitation(design, x, objective, samples, cond, log_det, limits, fine, scale, tuple(search.iterations),
+                      tuple(r[3] for r in runs), tuple(r[1] for r in runs), tuple(r[4][1] for r in runs), starts,
+                      max_iter, None if time_budget is None else float(time_budget),
+                      _stopped([r[4] for r in runs], search.out_of_time, max_iter, time_budget),
+                      time.perf_counter() - clock)
 
 
 def before(model: RobotModel, trajectory: Trajectory, t_final: float, design: Design, samples: int,
