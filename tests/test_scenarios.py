@@ -49,7 +49,7 @@ def test_every_packaged_scenario_loads_builds_and_runs(name):
     s = scenario.setup
     n = s.plant.model.n
     assert s.controller.model.n == n
-    assert s.trajectory.n == n
+    assert s.trajectory.n == s.controller.error_size  # n joints, or a task-space law's m coordinates
     assert s.q0.shape == (n,) and s.dq0.shape == (n,)
     assert s.t_final > 0
     assert np.all(np.isfinite(s.plant.phi))

@@ -192,7 +192,7 @@ def test_cartesian_slotine_li_takes_every_update_law(adaptation):
 
 def test_a_task_run_draws_its_path_and_kinematic_estimates(tmp_path):
     """path.png (the hand over the desired path, in the arm's plane) and kinematics.png (θ̂_k and its truth)."""
-    from robotadapt.report.task_figures import kinematics_figure, path_figure
+    from robotadapt.report.figures import kinematics_figure, path_figure
 
     res = ra.load("task-jacobian-2link", ["simulation.t_final=1.0"]).run()
     written = {p.name for p in ra.save_figures(res, tmp_path, "aj")}

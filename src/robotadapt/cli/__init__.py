@@ -15,7 +15,7 @@ from types import ModuleType
 from ..validation import ConfigError
 
 EXIT_BAD_INPUT = 2
-COMMANDS = ("list", "run", "gains", "pe", "excite", "identify", "export", "figures", "compare", "sweep", "tune")
+COMMANDS = ("list", "run", "gains", "pe", "excite", "identify", "export", "figures", "compare", "sweep", "tune", "explore")
 
 
 def version() -> str:

@@ -335,6 +335,48 @@ def torques(res: SimulationResult, path: Path, title: str = "", model: Any = Non
     return save_figure(torques_figure(res, title, model), path, output)
 
 
+# the hand of a task-space law's run (docs/task-space.md)
+
+VIEWS = {2: ((0, 1),), 3: ((0, 1), (0, 2), (1, 2))}  # the planes drawn: x–y; or the top, front and side views
+
+
+def path_figure(res: SimulationResult, title: str = "") -> Figure:
+    """The hand's path x(t) = x_d − e (solid) over the desired x_d(t) (dashed), in the x–y plane of a planar arm or in
+    three views (x–y from above, x–z from the front, y–z from the side) in space, equal scales, metres; the start
+    marked."""
+    xd = res.q_des
+    x = xd - res.e
+    views = VIEWS[xd.shape[-1]]
+    fig = new_figure(figsize=(4.2 * len(views), 4.6))
+    axes = fig.subplots(1, len(views), squeeze=False)[0]
+    for ax, (a, b) in zip(axes, views, strict=True):
+        ax.plot(x[:, a], x[:, b], label="hand $x$", **{**style(0), "marker": None})
+        ax.plot(xd[:, a], xd[:, b], label="desired $x_d$", **{**style(1), "marker": None})  # on top: seen where equal
+        ax.plot(x[:1, a], x[:1, b], "o", color=style(0)["color"], label="start")
+        ax.set_xlabel(f"${'xyz'[a]}$ (m)")
+        ax.set_ylabel(f"${'xyz'[b]}$ (m)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(True, alpha=0.3)
+    legend(axes[-1])
+    fig.suptitle(titled(title, "hand path"))
+    fig.tight_layout()
+    return fig
+
+
+def kinematics_figure(res: SimulationResult, title: str = "") -> Figure:
+    """θ̂_k(t), the kinematic parameters the adaptive Jacobian estimates (solid), and their truths (dashed), metres."""
+    theta, truth = res.monitors["theta_hat"], res.monitors["theta_true"]
+    names = [n[len("theta_hat["):-1] for n in res.state_names if n.startswith("theta_hat[")]
+    fig, axes = panels(1)
+    ax = axes[0]
+    for i, name in enumerate(names):
+        line = style(i)
+        ax.plot(res.t, theta[:, i], label=f"$\\hat\\theta$ {name}", **line)
+        ax.plot(res.t, truth[:, i], linestyle="--", color=line["color"], linewidth=1.0)
+    ax.set_ylabel(r"kinematic estimate $\hat\theta_k$ (m)")
+    return finish(fig, axes, titled(title, r"kinematic estimates $\hat\theta_k$ (solid), true (dashed)"))
+
+
 #: the figures of one run, by file stem (`save_figures`, the gallery)
 RUN_FIGURES = ("tracking_error", "parameters", "torques")
 
@@ -348,8 +390,6 @@ def save_figures(res: SimulationResult, directory: str | os.PathLike[str], title
     written = [write(res, directory / output.name(stem), title, model, output)
                for stem, write in zip(RUN_FIGURES, (tracking_error, parameters, torques), strict=True)]
     if res.space == "task":  # the hand's path, and the kinematic estimate of a law that has one
-        from .task_figures import kinematics_figure, path_figure
-
         written.append(save_figure(path_figure(res, title), directory / output.name("path"), output))
         if "theta_hat" in res.monitors:
             written.append(save_figure(kinematics_figure(res, title), directory / output.name("kinematics"), output))

@@ -69,19 +69,21 @@ def native_map(fn: Callable[..., dict[str, Any]], obj: Any, static: Any, samples
         return tuple(out[k] for k in sorted(out) if out[k] is not None)
 
     @float64
-    def found() -> tuple[Any, Any] | None:  # None: the maps hold host-side code (remembered, not traced again)
+    def build_it() -> tuple[Any, Any] | None:  # None: the maps hold host-side code (remembered, not traced again)
+        try:
+            out = jax_module().eval_shape(lambda a, *r: fn(pytree.unflatten(structure, a), static, *r), leaves, *first)
+            names = [k for k in sorted(out) if out[k] is not None]
+            native, layout = build.compiled(program, tuple(leaves), *first, name="records")
+        except Exception:  # tracing met code that needs concrete values, or the translator a form it lacks
+            return None
+        return native, (layout, names)
+
+    def found() -> tuple[Any, Any] | None:  # from the disk store without JAX (a warm process imports none), else built
         stable = stable_key(key)
         stored = build.remembered(stable) if stable is not None else None
         if stored is None:
-            try:
-                out = jax_module().eval_shape(lambda a, *r: fn(pytree.unflatten(structure, a), static, *r), leaves,
-                                              *first)
-                names = [k for k in sorted(out) if out[k] is not None]
-                native, layout = build.compiled(program, tuple(leaves), *first, name="records")
-            except Exception:  # tracing met code that needs concrete values, or the translator a form it lacks
-                return None
-            stored = native, (layout, names)
-            if stable is not None:
+            stored = build_it()
+            if stored is not None and stable is not None:
                 build.remember(stable, *stored)
         return stored
 
