@@ -95,8 +95,43 @@ def _period(omega: Array, ramp: float) -> float | None:
     return float(2 * np.pi / abs(float(omega))) if ramp == 0.0 and np.ndim(omega) == 0 else None
 
 
+class InPlane:
+    """What a path traced in a plane by an angle θ(t) holds and does (:class:`Circle`, :class:`FigureEight`): its
+    `centre`, `omega`, `plane`, `phase`, `ramp` validated with its own sizes, the plane's (u, v), the task dimension,
+    the period and θ, θ̇, θ̈ at t (:func:`_angle`)."""
+
+    centre: Array
+    omega: Array
+    plane: Any
+    phase: Array
+    ramp: float
+
+    def settle(self, **sizes: Array) -> None:
+        """Validate the fields (sizes: the path's own, already checked) and set the plane's basis (u, v)."""
+        centre = _point(self.centre, "trajectory.centre")
+        plane, u, v = _basis(self.plane, centre.shape[0])
+        values = {"centre": centre, **sizes, "omega": _omega(self.omega), "plane": plane,
+                  "phase": scalar_gain(self.phase, "trajectory.phase", positive=False),
+                  "ramp": as_scalar(self.ramp, "trajectory.ramp", nonnegative=True), "u": u, "v": v}
+        for name, value in values.items():
+            object.__setattr__(self, name, value)
+
+    @property
+    def n(self) -> int:
+        return int(self.centre.shape[-1])
+
+    @property
+    def period(self) -> float | None:
+        return _period(self.omega, self.ramp)
+
+    def angle(self, t: Array) -> tuple[Any, Array, Array, Array]:
+        """(the namespace of t, θ, θ̇, θ̈) at t."""
+        xp, tt = _time(t)
+        return (xp, *_angle(xp, tt, self.omega, self.phase, self.ramp))
+
+
 @dataclass(frozen=True, eq=False)
-class Circle(Module):
+class Circle(InPlane, Module):
     """x_d = c + r (cos θ u + sin θ v) in the plane (u, v), θ(t) = ωt + phase, or with a ramp T > 0
 
     θ = phase + ωT (5s⁴/2 − 3s⁵ + s⁶) + ω max(t − T, 0),   s = clip(t/T, 0, 1)   (θ̇ = ω (10s³ − 15s⁴ + 6s⁵)),
@@ -121,25 +156,10 @@ class Circle(Module):
     v: Array = field(init=False)
 
     def __post_init__(self) -> None:
-        centre = _point(self.centre, "trajectory.centre")
-        plane, u, v = _basis(self.plane, centre.shape[0])
-        values = {"centre": centre, "radius": scalar_gain(self.radius, "trajectory.radius"), "omega": _omega(self.omega),
-                  "plane": plane, "phase": scalar_gain(self.phase, "trajectory.phase", positive=False),
-                  "ramp": as_scalar(self.ramp, "trajectory.ramp", nonnegative=True), "u": u, "v": v}
-        for name, value in values.items():
-            object.__setattr__(self, name, value)
-
-    @property
-    def n(self) -> int:
-        return int(self.centre.shape[-1])
-
-    @property
-    def period(self) -> float | None:
-        return _period(self.omega, self.ramp)
+        self.settle(radius=scalar_gain(self.radius, "trajectory.radius"))
 
     def __call__(self, t: Array) -> Reference:
-        xp, tt = _time(t)
-        theta, dtheta, ddtheta = _angle(xp, tt, self.omega, self.phase, self.ramp)
+        xp, theta, dtheta, ddtheta = self.angle(t)
         c, s = xp.cos(theta), xp.sin(theta)
         radial, tangent = c * self.u + s * self.v, -s * self.u + c * self.v
         r = self.radius[..., None]
@@ -147,7 +167,7 @@ class Circle(Module):
 
 
 @dataclass(frozen=True, eq=False)
-class FigureEight(Module):
+class FigureEight(InPlane, Module):
     """The lemniscate of Gerono, (x/a)⁴ = (x/a)² − (y/b)² in plane coordinates (x, y) along (u, v), traced as
 
     x_d = c + a sin θ u + (b/2) sin 2θ v,   a = width/2, b = height (the full extents),
@@ -172,26 +192,11 @@ class FigureEight(Module):
     v: Array = field(init=False)
 
     def __post_init__(self) -> None:
-        centre = _point(self.centre, "trajectory.centre")
-        plane, u, v = _basis(self.plane, centre.shape[0])
-        values = {"centre": centre, "width": scalar_gain(self.width, "trajectory.width"),
-                  "height": scalar_gain(self.height, "trajectory.height"), "omega": _omega(self.omega),
-                  "plane": plane, "phase": scalar_gain(self.phase, "trajectory.phase", positive=False),
-                  "ramp": as_scalar(self.ramp, "trajectory.ramp", nonnegative=True), "u": u, "v": v}
-        for name, value in values.items():
-            object.__setattr__(self, name, value)
-
-    @property
-    def n(self) -> int:
-        return int(self.centre.shape[-1])
-
-    @property
-    def period(self) -> float | None:
-        return _period(self.omega, self.ramp)
+        self.settle(width=scalar_gain(self.width, "trajectory.width"),
+                    height=scalar_gain(self.height, "trajectory.height"))
 
     def __call__(self, t: Array) -> Reference:
-        xp, tt = _time(t)
-        theta, dtheta, ddtheta = _angle(xp, tt, self.omega, self.phase, self.ramp)
+        xp, theta, dtheta, ddtheta = self.angle(t)
         s1, c1, s2, c2 = xp.sin(theta), xp.cos(theta), xp.sin(2 * theta), xp.cos(2 * theta)
         a, b = self.width[..., None] / 2, self.height[..., None]
         return Reference(self.centre + a * s1 * self.u + b / 2 * s2 * self.v,

@@ -284,6 +284,23 @@ def estimate(obj: Any, name: str = "phi_hat0") -> None:
     freeze(obj, **{name: as_vector(getattr(obj, name), obj.model.p, f"controller.{name}", broadcast=False)})
 
 
+class FixedEstimate(Law):
+    """The state of a law whose estimate φ̂ is a constant, `phi_hat0` (the baselines, operational-space control): none."""
+
+    phi_hat0: Array
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return ()
+
+    def initial_state(self, q0: Array, dq0: Array) -> Array:
+        return np.zeros(0)
+
+    def phi_hat(self, x: Array) -> Array:
+        xp = array_namespace(x)
+        return xp.broadcast_to(xp.asarray(self.phi_hat0), x.shape[:-1] + self.phi_hat0.shape)
+
+
 class EstimateState(Law):
     """The state of a law that adapts φ̂ with a gain (Slotine–Li, adaptive computed torque, DCAL: Tables 6.3.1, 6.2.1,
     7.2.1): the book's Euclidean update with Γ (state x = φ̂), `adaptation = "natural"` with the scalar γ (state:

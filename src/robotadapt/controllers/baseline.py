@@ -8,15 +8,15 @@ from typing import Any
 
 import numpy as np
 
-from ..arrays import array_namespace, matvec
+from ..arrays import matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
-from .base import Array, Law, errors, estimate, gains
+from .base import Array, FixedEstimate, errors, estimate, gains
 from .registry import Contender
 
 
 @dataclass(frozen=True, eq=False)
-class _Fixed(Law):
+class _Fixed(FixedEstimate):
     """Shared parts of controllers whose estimate φ̂ is a constant (no state)."""
 
     tuned = ("Kp", "Kv")
@@ -29,17 +29,6 @@ class _Fixed(Law):
     def __post_init__(self) -> None:
         gains(self, ("Kp", "Kv"), self.model.n)
         estimate(self)
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return ()
-
-    def initial_state(self, q0: Array, dq0: Array) -> Array:
-        return np.zeros(0)
-
-    def phi_hat(self, x: Array) -> Array:
-        xp = array_namespace(x)
-        return xp.broadcast_to(xp.asarray(self.phi_hat0), x.shape[:-1] + self.phi_hat0.shape)
 
     def filtered_error(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> Array:
         """r = ė + K_v⁻¹K_p e: the PD law's own filtered error (K_p = K_v Λ)."""

@@ -26,7 +26,7 @@ from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar, as_vector
-from .base import Array, EstimateState, Law, freeze, gains, inverse
+from .base import Array, EstimateState, FixedEstimate, Law, estimate, freeze, gains, inverse
 from .registry import Contender
 
 
@@ -220,11 +220,8 @@ class AdaptiveJacobian(Task):
                Ks=as_gain(self.Ks, n, "controller.Ks", semidefinite=True),
                Gamma=as_gain(self.Gamma, self.model.p, "controller.Gamma"),
                Gamma_k=as_gain(self.Gamma_k, k, "controller.Gamma_k"),
-               theta_hat0=as_vector(theta_hat0, k, "controller.theta_hat0", broadcast=False),
-               phi_hat0=as_vector(self.phi_hat0, self.model.p, "controller.phi_hat0", broadcast=False)
-               if self.phi_hat0 is not None else None)
-        if self.phi_hat0 is None:
-            raise ConfigError("controller.phi_hat0", "required: the initial estimate φ̂(0), one value per parameter")
+               theta_hat0=as_vector(theta_hat0, k, "controller.theta_hat0", broadcast=False))
+        estimate(self)
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -301,7 +298,7 @@ class AdaptiveJacobian(Task):
 
 
 @dataclass(frozen=True, eq=False)
-class OperationalSpace(Task):
+class OperationalSpace(Task, FixedEstimate):
     """Khatib's operational-space control with a fixed model φ̂, the task-space laws' non-adaptive baseline (IEEE J.
     Robotics and Automation 3(1), 1987; docs/task-space.md):
 
@@ -331,22 +328,7 @@ class OperationalSpace(Task):
         m = self.error_size
         freeze(self, Kp=as_gain(self.Kp, m, "controller.Kp"), Kv=as_gain(self.Kv, m, "controller.Kv"),
                Kd=as_gain(self.Kd, self.model.n, "controller.Kd", semidefinite=True))
-        if self.phi_hat0 is None:
-            raise ConfigError("controller.phi_hat0", "required: the model's parameters φ̂, one value per parameter")
-        freeze(self, phi_hat0=as_vector(self.phi_hat0, self.model.p, "controller.phi_hat0", broadcast=False))
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return ()
-
-    def initial_state(self, q0: Array, dq0: Array) -> Array:
-        return np.zeros(0)
-
-    def phi_hat(self, x: Array) -> Array:
-        return array_namespace(x).broadcast_to(self.phi_hat0, x.shape[:-1] + (self.model.p,))
-
-    def lyapunov_caveat(self) -> str | None:
-        return None
+        estimate(self)
 
     def __call__(self, t: Array, x: Array, q: Array, dq: Array, ref: Reference) -> tuple[Array, Array]:
         xp = array_namespace(q, x)
