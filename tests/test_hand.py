@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from robotadapt.robots import OneLinkArm, PolarArm, RobotModel, TwoLinkArm, orientation_error
+from robotadapt.robots import OneLinkArm, PolarArm, RobotModel, TaskKinematics, TwoLinkArm, orientation_error
 from robotadapt.robots.kinematic_tree import KinematicTree
 from robotadapt.robots.symbolic import planar_arm, puma560
 from robotadapt.validation import ConfigError
@@ -404,20 +404,21 @@ def test_task_axes():
     assert {k: m.task_axes for k, m in spatial.items()} == dict.fromkeys(spatial, (0, 1, 2))
 
 
-def test_models_without_a_hand_say_so():
-    """A model of the user's own without task-space methods says so and names KinematicTree; the Pinocchio model has
-    a hand but no basis, and names the tree that has one."""
+def test_a_model_without_a_hand_is_refused_by_the_task_laws():
+    """A model of the user's own without task-space kinematics is refused by a task-space law in one line naming the
+    robot; every packaged arm but the Pinocchio model is a TaskKinematics, which gives the hand alone (no reach bound)."""
+    from robotadapt.controllers.task_space import TaskSlotineLi
+    from robotadapt.robots.workspace import reach
+
     class Bare(RobotModel):
         n, param_names = 1, ("m",)
         mass_matrix = coriolis_matrix = gravity = friction = regressor = None  # the dynamics play no part here
 
-    bare, zero = Bare(), np.zeros(1)
-    for call in (lambda: bare.hand(zero, zero), lambda: bare.kinematic_names(), lambda: bare.kinematic_values(TOOL),
-                 lambda: bare.kinematic_basis(zero, zero), lambda: bare.kinematic_regressor(zero, zero, TOOL)):
-        with pytest.raises(NotImplementedError, match="Bare has no hand frame.*KinematicTree"):
-            call()
-    with pytest.raises(NotImplementedError, match=r"KinematicTree.*from_pinocchio"):
-        PinocchioArm.example("ur5").kinematic_regressor(np.zeros(6), np.zeros(6))
+    with pytest.raises(ConfigError, match="Bare has no hand frame for a task-space law"):
+        TaskSlotineLi(Bare(), Lam=1.0, Kv=1.0, Gamma=1.0, phi_hat0=[1.0])
+    assert all(isinstance(arm, TaskKinematics) for arm in (TwoLinkArm(), PolarArm(), KinematicTree.example("ur5")))
+    ur5 = PinocchioArm.example("ur5")
+    assert not isinstance(ur5, TaskKinematics) and reach(ur5) is None and ur5.task_axes == (0, 1, 2)
 
 
 # -- JAX and batches --------------------------------------------------------------------------------------------------

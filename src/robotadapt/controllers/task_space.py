@@ -18,12 +18,13 @@ null space holds a posture: q̇_r gains N k_n (q_0 − q), N = I − J⁺J.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 
 from ..arrays import array_namespace, matvec
 from ..robots.base import RobotModel
+from ..robots.hand import TaskKinematics
 from ..trajectories import Reference
 from ..validation import ConfigError, as_gain, as_scalar, as_vector
 from .base import Array, EstimateState, FixedEstimate, Law, estimate, freeze, gains, inverse
@@ -35,7 +36,7 @@ def _mm(A: Array, B: Array) -> Array:
 
 
 class Task(Law):
-    """What every task-space law shares: the hand (:meth:`RobotModel.hand` of the law's model, offset by `tool`), its m
+    """What every task-space law shares: the hand (:meth:`TaskKinematics.hand` of the law's model, offset by `tool`), its m
     position rows (`model.task_axes`), the damped pseudo-inverse and the posture of a redundant arm; the tracking error
     the run's metrics measure is x_d − x(q) (metres)."""
 
@@ -53,12 +54,18 @@ class Task(Law):
                damping=np.asarray(as_scalar(self.damping, "controller.damping", nonnegative=True)),
                posture=as_vector(0.0 if self.posture is None else self.posture, self.model.n, "controller.posture"),
                Kn=np.asarray(as_scalar(self.Kn, "controller.Kn", nonnegative=True)))
-        if not self.model.task_axes:
-            raise ConfigError("robot", f"{type(self.model).__name__} has no hand frame for a task-space law")
+        if not callable(getattr(self.model, "hand", None)):
+            raise ConfigError("robot", f"{type(self.model).__name__} has no hand frame for a task-space law: use an arm "
+                              "that has one (the book's arms, a DH table, a URDF)")
+
+    @property
+    def arm(self) -> TaskKinematics:
+        """The model, as the arm with a hand frame its construction checked it is."""
+        return cast(TaskKinematics, self.model)
 
     @property
     def error_size(self) -> int:
-        return len(self.model.task_axes)
+        return len(self.arm.task_axes)
 
     def monitors(self, x: Array, q: Array) -> dict[str, Array]:
         """`hand_sigma_min`: the smallest singular value of the hand's m×n Jacobian J(q) at the logged instants (m/rad):
@@ -68,7 +75,7 @@ class Task(Law):
 
     def kinematics(self, q: Array, dq: Array) -> tuple[Array, Array, Array]:
         """(x, J, J̇): the hand's m position coordinates, their Jacobian and its derivative, `(..., m)`, `(..., m, n)`."""
-        hand = self.model.hand(q, dq, self.tool)
+        hand = self.arm.hand(q, dq, self.tool)
         m = self.error_size
         return hand.p[..., :m], hand.J[..., :m, :], hand.dJ[..., :m, :]
 
@@ -162,7 +169,7 @@ class TaskSlotineLi(Task, EstimateState):
 @dataclass(frozen=True, eq=False)
 class AdaptiveJacobian(Task):
     """Cheah, Liu & Slotine's adaptive Jacobian law (IJRR 25(3), 2006; docs/task-space.md): the kinematics linear in
-    kinematic parameters θ_k (link lengths, a tool offset: `unknown` names them, :meth:`RobotModel.kinematic_names`),
+    kinematic parameters θ_k (link lengths, a tool offset: `unknown` names them, :meth:`TaskKinematics.kinematic_names`),
     ẋ = J(q, θ_k) q̇ = Y_k(q, q̇) θ_k (+ the known part), estimated with θ̂_k while φ̂ adapts:
 
     Δx = x − x_d (x measured),  ẋ̂ = Ĵ q̇ = J(q, θ̂_k) q̇,  Δẋ̂ = ẋ̂ − ẋ_d
@@ -200,7 +207,7 @@ class AdaptiveJacobian(Task):
 
     def __post_init__(self) -> None:
         self.checks_task()
-        names = self.model.kinematic_names(self.tool)
+        names = self.arm.kinematic_names(self.tool)
         unknown = names if self.unknown is None else tuple(self.unknown)
         for name in unknown:
             if name not in names:
@@ -209,7 +216,7 @@ class AdaptiveJacobian(Task):
         m, n, k = self.error_size, self.model.n, len(unknown)
         theta_hat0 = self.theta_hat0
         if isinstance(theta_hat0, dict) and set(theta_hat0) == {"scale"}:  # {scale = 0.8}: 20 % short of the arm's
-            values = np.asarray(self.model.kinematic_values(self.tool), dtype=float)
+            values = np.asarray(self.arm.kinematic_values(self.tool), dtype=float)
             theta_hat0 = as_scalar(theta_hat0["scale"], "controller.theta_hat0.scale") * values[
                 [names.index(name) for name in unknown]]
         elif theta_hat0 is None or isinstance(theta_hat0, dict):
@@ -240,8 +247,8 @@ class AdaptiveJacobian(Task):
     @property
     def theta(self) -> Array:
         """The arm's true kinematic parameters of `unknown` (for the monitors: the law's torque never reads them)."""
-        names = self.model.kinematic_names(self.tool)
-        values = np.asarray(self.model.kinematic_values(self.tool), dtype=float)
+        names = self.arm.kinematic_names(self.tool)
+        values = np.asarray(self.arm.kinematic_values(self.tool), dtype=float)
         return values[[names.index(k) for k in self.estimated]]
 
     @property
@@ -252,7 +259,7 @@ class AdaptiveJacobian(Task):
     def _parts(self, x: Array, q: Array, dq: Array, ref: Reference) -> dict[str, Array]:
         """Every signal of the law at (x, q, q̇) (class docstring)."""
         m = self.error_size
-        basis = self.model.kinematic_basis(q, dq, self.tool, self.unknown)
+        basis = self.arm.kinematic_basis(q, dq, self.tool, self.unknown)
         theta = self.theta_hat(x)
         B, dB = basis.B[..., :m, :], basis.dB[..., :m, :]
         J_hat = B[..., 0, :, :] + (theta[..., :, None, None] * B[..., 1:, :, :]).sum(axis=-3)

@@ -5,7 +5,7 @@ their optional dependency on first use, so they are importable here without it.
 """
 
 from .base import RobotModel
-from .hand import Hand, KinematicBasis, orientation_error
+from .hand import Hand, KinematicBasis, TaskKinematics, orientation_error
 from .identifiability import BaseParameterModel, BaseParameters, base_parameters
 from .one_link import OneLinkArm
 from .pinocchio import PinocchioArm
@@ -15,5 +15,5 @@ from .two_link import TwoLinkArm
 
 __all__ = [
     "BaseParameterModel", "BaseParameters", "Hand", "KinematicBasis", "OneLinkArm", "PinocchioArm", "PolarArm",
-    "RobotModel", "SymbolicArm", "TwoLinkArm", "base_parameters", "orientation_error",
+    "RobotModel", "SymbolicArm", "TaskKinematics", "TwoLinkArm", "base_parameters", "orientation_error",
 ]

@@ -7,19 +7,22 @@ orientation error a Cartesian law feeds back.
     p(q, θ_k) = h_0(q) + Σ_j θ_k,j h_j(q),   J_v(q, θ_k) = B_0(q) + Σ_j θ_k,j B_j(q)
     ẋ = Y_k(q, q̇) θ_k + B_0(q) q̇,   Y_k[:, j] = B_j(q) q̇      (the kinematic regressor)
 
-The models' methods (`hand`, `kinematic_basis`, `kinematic_regressor`) are on :class:`robotadapt.robots.base.RobotModel`;
-this module holds their value types and the pieces the book's planar arms share. Every function takes leading batch
+A model with a hand frame is a :class:`TaskKinematics` (KinematicTree, SymbolicArm, the book's arms): `hand`,
+`kinematic_basis`, `kinematic_regressor`; this module holds them, their value types and the pieces the book's planar
+arms share. (PinocchioArm gives `hand` alone, through Pinocchio's frame functions.) Every function takes leading batch
 axes and is written with the namespace of its inputs (numpy or `jax.numpy`), without writes.
 """
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from ..arrays import array_namespace
+from ..validation import ConfigError
 
 Array = Any
 #: the names of a tool offset's components, in the last link's axes
@@ -139,13 +142,83 @@ def planar_chain(q: Array, dq: Array, lengths: Sequence[float], tool: Array | No
     return hand, h, B, dB
 
 
-class PlanarChain:
+class TaskKinematics(ABC):
+    """The task-space kinematics of an arm with a hand frame (a mixin before
+    :class:`robotadapt.robots.base.RobotModel`): the model gives `hand`, its kinematic parameters' names and values and
+    their columns (`_kinematic_columns`); the basis and the regressor follow here."""
+
+    @property
+    def task_axes(self) -> tuple[int, ...]:
+        """The position rows a task uses: (0, 1, 2); (0, 1) for an arm whose hand moves in the x–y plane."""
+        return (0, 1, 2)
+
+    @abstractmethod
+    def hand(self, q: Array, dq: Array, tool: Array | None = None) -> Hand:
+        """The hand frame at (q, q̇): the last link's frame offset by `tool` (3,) in its axes (m; None: zero):
+        position, orientation, geometric Jacobian J (rows: linear velocity of the origin, angular velocity; world axes)
+        and J̇ at (q, q̇), so that the hand's classical acceleration is J q̈ + J̇ q̇ (:class:`Hand`)."""
+
+    @abstractmethod
+    def kinematic_names(self, tool: Array | None = None) -> tuple[str, ...]:
+        """Every candidate kinematic parameter of the hand position, in order ("tool.x", "tool.y", "tool.z" last when
+        a tool is given)."""
+
+    @abstractmethod
+    def kinematic_values(self, tool: Array | None = None) -> Array:
+        """The true values (m) of `kinematic_names(tool)`, in order."""
+
+    @abstractmethod
+    def _kinematic_columns(self, q: Array, dq: Array, tool: Array | None) -> tuple[Hand, Array, Array, Array]:
+        """(the hand, and for every kinematic parameter j its columns h_j `(..., k, 3)`, B_j `(..., k, 3, n)`, Ḃ_j):
+        the parts of p, J_v and J̇_v that θ_k,j multiplies; the rest (prismatic travel) is what they leave."""
+
+    def kinematic_basis(self, q: Array, dq: Array, tool: Array | None = None,
+                        unknown: tuple[str, ...] | None = None) -> KinematicBasis:
+        """The hand position linear in the parameters named in `unknown` (default: every `kinematic_names(tool)`), in
+        that order: p = h[0] + Σ_j θ_k[j] h[j+1], J_v = B[0] + Σ_j θ_k[j] B[j+1], dB its rate (Cheah, Liu & Slotine
+        2006). Index 0 is the rest at the model's values: the known parameters folded in, and what no parameter
+        multiplies (prismatic travel)."""
+        names = self.kinematic_names(tool)
+        wanted = names if unknown is None else tuple(unknown)
+        missing = [name for name in wanted if name not in names]
+        if missing or len(set(wanted)) != len(wanted):
+            raise ConfigError("unknown", f"expected distinct names among {', '.join(names) or '(none)'}; got "
+                              f"{', '.join(map(repr, wanted))}")
+        hand, h, B, dB = self._kinematic_columns(q, dq, tool)
+        xp = array_namespace(h, B, dB)
+        pick = np.array([names.index(name) for name in wanted], dtype=int)
+        theta = xp.take(xp.asarray(self.kinematic_values(tool)), pick, axis=-1)
+        h, B, dB = xp.take(h, pick, axis=-2), xp.take(B, pick, axis=-3), xp.take(dB, pick, axis=-3)
+        h0 = hand.p - (theta[:, None] * h).sum(axis=-2)
+        B0 = hand.J[..., :3, :] - (theta[:, None, None] * B).sum(axis=-3)
+        dB0 = hand.dJ[..., :3, :] - (theta[:, None, None] * dB).sum(axis=-3)
+        lead = hand.J.shape[:-2]  # the broadcast leading axes of q and q̇
+
+        def on(x: Array, k: int) -> Array:
+            return xp.broadcast_to(x, lead + x.shape[x.ndim - k :])
+
+        return KinematicBasis(xp.concat([on(h0[..., None, :], 2), on(h, 2)], axis=-2),
+                              xp.concat([on(B0[..., None, :, :], 3), on(B, 3)], axis=-3),
+                              xp.concat([on(dB0[..., None, :, :], 3), on(dB, 3)], axis=-3))
+
+    def kinematic_regressor(self, q: Array, dq: Array, tool: Array | None = None,
+                            unknown: tuple[str, ...] | None = None) -> tuple[Array, Array]:
+        """(Y_k `(..., 3, k)`, known `(..., 3)`) with ẋ = J_v q̇ = Y_k θ_k + known: Y_k[:, j] = B[j+1] q̇ and
+        known = B[0] q̇ of :meth:`kinematic_basis` (Cheah, Liu & Slotine 2006)."""
+        B = self.kinematic_basis(q, dq, tool, unknown).B
+        Bq = (B * dq[..., None, None, :]).sum(axis=-1)  # (..., k+1, 3)
+        xp = array_namespace(Bq)
+        return xp.swapaxes(Bq[..., 1:, :], -1, -2), Bq[..., 0, :]
+
+
+class PlanarChain(TaskKinematics):
     """The task-space methods of a book's planar arm of revolute joints about z (:func:`planar_chain`), a mixin before
     :class:`robotadapt.robots.base.RobotModel`: the model gives `_hand_links`, (name, length in m) per link."""
 
     @property
+    @abstractmethod
     def _hand_links(self) -> tuple[tuple[str, float], ...]:
-        raise NotImplementedError
+        """(name, length in m) of each link, base first."""
 
     @property
     def task_axes(self) -> tuple[int, ...]:

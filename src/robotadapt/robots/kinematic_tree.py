@@ -62,7 +62,7 @@ from ..arrays import array_namespace
 from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
 from .base import Array, RobotModel
 from .dh import EXTRAS, LINK_KEYS, SIGNED, SMOOTH_VELOCITY, Geometry, SerialChain, joint_placements
-from .hand import Hand, hand_on, tool_names, tool_values
+from .hand import Hand, TaskKinematics, hand_on, tool_names, tool_values
 from .hand import cross as _cross
 
 _MATMUL_ABOVE = 64  # leading size (states × links) above which small products use matmul (see `_many`)
@@ -184,7 +184,7 @@ class _Motion:
 
 
 @dataclass(frozen=True, eq=False)
-class KinematicTree(SerialChain, RobotModel):
+class KinematicTree(SerialChain, TaskKinematics, RobotModel):
     """A chain (or tree) of revolute ('R') and prismatic ('P') joints: constants only, every method traceable.
 
     Per joint: `parents` (index of the parent joint, −1 for the base; parents come first), `rotation` (n, 3, 3) and
@@ -481,7 +481,7 @@ class KinematicTree(SerialChain, RobotModel):
         return tool_values(self._const["kin_value"], tool)
 
     def hand(self, q: Array, dq: Array, tool: Array | None = None) -> Hand:
-        """The last link's frame offset by `tool` (:meth:`RobotModel.hand`): with S̃_j = [u_j; x_j] joint j's motion
+        """The last link's frame offset by `tool` (:meth:`TaskKinematics.hand`): with S̃_j = [u_j; x_j] joint j's motion
         in world axes at the world origin and V_j = [ω_j; v_j] = Σ S̃_l q̇_l over the joints that move link j,
         J_j = [x_j + u_j × p; u_j] and, as Ṡ_j = V_j ×ₘ S̃_j = [ω_j × u_j; ω_j × x_j + v_j × u_j] (Featherstone 2008,
         §2.9) and ṗ = v_n + ω_n × p, J̇_j = [ẋ_j + u̇_j × p + u_j × ṗ; u̇_j], for the joints that move the last link."""

@@ -130,8 +130,6 @@ def _unit_inertias() -> Array:
 
 _T = _unit_inertias().reshape(10, 36)
 _FRICTION = {"viscous": "fv", "coulomb": "fc", "smooth_coulomb": "fs", "offset": "off"}  # group → name prefix, in order
-_NO_BASIS = ("PinocchioArm has no kinematic basis (kinematic_basis, kinematic_regressor): take the same arm as a "
-             "KinematicTree (robotadapt.robots.kinematic_tree.KinematicTree.from_pinocchio(arm.pin_model)), which has it")
 
 
 @dataclass(frozen=True, eq=False)
@@ -268,9 +266,14 @@ class PinocchioArm(RobotModel):
         Y = self._each(self._momentum, (self.n, 10 * self.n), q, dq)
         return np.concatenate([Y, np.zeros(Y.shape[:-1] + (self.p - 10 * self.n,))], axis=-1)
 
-    # task space ------------------------------------------------------------------------------------------------------
+    # task space: the hand alone (the kinematic basis is KinematicTree.from_pinocchio(arm.pin_model)'s) ------------------
+    @property
+    def task_axes(self) -> tuple[int, ...]:
+        """(0, 1, 2): the hand's position in space."""
+        return (0, 1, 2)
+
     def hand(self, q: Array, dq: Array, tool: Array | None = None) -> Hand:
-        """The last joint's frame offset by `tool` (:meth:`RobotModel.hand`), by Pinocchio's frame algorithms
+        """The last joint's frame offset by `tool` (:meth:`TaskKinematics.hand`), by Pinocchio's frame algorithms
         (`computeJointJacobiansTimeVariation`, `updateFramePlacements`, `getFrameJacobian` and
         `getFrameJacobianTimeVariation`, LOCAL_WORLD_ALIGNED) on a copy of the model holding that frame."""
         pin, n = _pin(), self.n
@@ -290,11 +293,6 @@ class PinocchioArm(RobotModel):
         return Hand(flat[..., :3], flat[..., 3:12].reshape(lead + (3, 3)),
                     flat[..., 12 : 12 + 6 * n].reshape(lead + (6, n)), flat[..., 12 + 6 * n :].reshape(lead + (6, n)))
 
-    def kinematic_names(self, tool: Array | None = None) -> tuple[str, ...]:
-        raise NotImplementedError(_NO_BASIS)
-
-    def kinematic_values(self, tool: Array | None = None) -> Array:
-        raise NotImplementedError(_NO_BASIS)
 
     def _tool_frame(self, tool: Array) -> tuple[Any, Any, int]:
         """(model, data, frame id) of a copy of the model with a frame at `tool` in the last joint's frame, cached per

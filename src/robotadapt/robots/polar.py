@@ -17,11 +17,11 @@ from dataclasses import dataclass
 from ..arrays import array_namespace, matrix, vector
 from ..validation import as_scalar, check_switch
 from .base import Array, RobotModel
-from .hand import Hand, hand_on, planar_axes, tool_names, tool_values
+from .hand import Hand, TaskKinematics, hand_on, planar_axes, tool_names, tool_values
 
 
 @dataclass(frozen=True, eq=False)
-class PolarArm(RobotModel):
+class PolarArm(TaskKinematics, RobotModel):
     """Revolute + prismatic arm; `g` in m/s² (the book's 9.8 by default)."""
 
     g: float = 9.8

@@ -28,12 +28,12 @@ from ..pytree import derived
 from ..validation import ConfigError, as_array, as_scalar, as_vector, check_names, check_spd, check_switch
 from .base import Array, RobotModel
 from .dh import EXTRAS, LINK_KEYS, SIGNED, SMOOTH_VELOCITY, Compiled, Geometry, SerialChain, compiled, joint_placements
-from .hand import Hand
+from .hand import Hand, TaskKinematics
 from .kinematic_tree import KinematicTree
 
 
 @dataclass(frozen=True, eq=False)
-class SymbolicArm(SerialChain, RobotModel):
+class SymbolicArm(SerialChain, TaskKinematics, RobotModel):
     """A serial arm of revolute ('R') and prismatic ('P') joints given by its DH table and link inertias.
 
     Geometry (per joint, SI units): `a`, `alpha`, `d`, `theta` (for a revolute joint θ = q + theta, for a prismatic one

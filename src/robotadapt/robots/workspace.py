@@ -3,26 +3,28 @@ the joint angles that put the hand at a point (a task-space run starts on its pa
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from ..validation import ConfigError
-from .base import RobotModel
+from .hand import TaskKinematics
 
 Array = Any
 
 
-def reach(model: RobotModel, tool: Array | None = None) -> tuple[np.ndarray, float, float] | None:
+def reach(model: Any, tool: Array | None = None) -> tuple[np.ndarray, float, float] | None:
     """(origin, inner, outer): every point the hand reaches lies between `inner` and `outer` metres from `origin`, in
-    the hand's task coordinates (`model.task_axes`). From the kinematic parameters (:meth:`RobotModel.kinematic_names`):
+    the hand's task coordinates (`model.task_axes`). From the kinematic parameters (:meth:`TaskKinematics.kinematic_names`):
     the vectors fixed in the links, grouped by name ("joint3.x", "joint3.y" → one vector), add up to at most the sum of
     their lengths; a spatial arm's first one, fixed in the base, places the origin. The book's two-link arm (l1, l2)
     also has inner = |l1 − l2|. None where the hand's position is not all parameters (a prismatic joint's travel):
-    no bound is claimed."""
+    no bound is claimed, nor for an arm whose hand has no kinematic parameters."""
+    if not isinstance(model, TaskKinematics):  # a hand without kinematic parameters (PinocchioArm): no bound
+        return None
     names, values = model.kinematic_names(tool), np.asarray(model.kinematic_values(tool), dtype=float)
     m = len(model.task_axes)
-    q = np.zeros(model.n)
+    q = np.zeros(cast(Any, model).n)  # a TaskKinematics is a RobotModel too
     basis = model.kinematic_basis(q, q, tool)
     if not names or np.abs(np.asarray(basis.h)[0]).max() > 1e-12:
         return None
@@ -41,7 +43,7 @@ def reach(model: RobotModel, tool: Array | None = None) -> tuple[np.ndarray, flo
     return origin, inner, outer
 
 
-def inverse_kinematics(model: RobotModel, x: Array, guess: Array, tool: Array | None = None, tol: float = 1e-12,
+def inverse_kinematics(model: Any, x: Array, guess: Array, tool: Array | None = None, tol: float = 1e-12,
                        iterations: int = 500, field: str = "plant.q0") -> np.ndarray:
     """Joint angles q with the hand at `x` (its m task coordinates), by damped Gauss–Newton from `guess` (the
     nearest solution to it: an elbow up or down): q ← q + Jᵀ(JJᵀ + μ²I)⁻¹ (x − x(q)), μ shrinking with the
@@ -49,7 +51,7 @@ def inverse_kinematics(model: RobotModel, x: Array, guess: Array, tool: Array | 
     m = len(model.task_axes)
     q = np.array(guess, dtype=float)
     target = np.asarray(x, dtype=float)
-    zero = np.zeros(model.n)
+    zero = np.zeros(len(guess))
     for _ in range(iterations):
         hand = model.hand(q, zero, tool)
         e = target - np.asarray(hand.p)[:m]
