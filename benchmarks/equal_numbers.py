@@ -224,7 +224,7 @@ def difference(a: Any, b: Any) -> float | None:
 def compare_variant(a: Path, b: Path, keys: list[str] | None = None, skip: tuple[str, ...] = ()) -> tuple[str, float, str]:
     """(group, max rel, what is worst or missing) of one variant's folders; `keys`: only these metrics.json keys (two
     captures logged at different rates: the metrics every step folds), no result.npz; `skip`: every key but these
-    metrics.json keys (result.npz included)."""
+    (metrics.json keys, or result.npz arrays: a key one side adds)."""
     sa, sb = (json.loads((d / "status.json").read_text()) for d in (a, b))
     if sa["status"] != "ran" or sb["status"] != "ran":
         if sa["status"] == sb["status"] == "refused":
@@ -237,7 +237,8 @@ def compare_variant(a: Path, b: Path, keys: list[str] | None = None, skip: tuple
     if keys is None:
         with np.load(a / "result.npz") as ra_, np.load(b / "result.npz") as rb_:
             na, nb = dict(ra_), dict(rb_)
-        leaves += [(f"npz:{k}", na.get(k), nb.get(k), k in na and k in nb) for k in sorted(na.keys() | nb.keys())]
+        leaves += [(f"npz:{k}", na.get(k), nb.get(k), k in na and k in nb) for k in sorted(na.keys() | nb.keys())
+                   if k not in skip]
     worst, where = 0.0, ""
     for key, x, y, both in leaves:
         rel = difference(x, y) if both else None
@@ -287,7 +288,8 @@ def main() -> int:
     cmp.add_argument("a", type=Path, metavar="A_DIR")
     cmp.add_argument("b", type=Path, metavar="B_DIR")
     cmp.add_argument("--keys", help="compare only these metrics.json keys (comma-separated), no result.npz")
-    cmp.add_argument("--skip", default="", help="compare everything but these metrics.json keys (comma-separated)")
+    cmp.add_argument("--skip", default="",
+                     help="compare everything but these metrics.json keys or result.npz arrays (comma-separated)")
     work = sub.add_parser("_worker")  # internal: one scenario's variants in a fresh interpreter
     work.add_argument("out", type=Path)
     work.add_argument("jobs", type=json.loads)
