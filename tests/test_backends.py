@@ -37,11 +37,11 @@ def _law(kind=InertiaRelated):
     return kind(ARM, 2.5, 10.0, 20.0, [0.0, 0.0])
 
 
-def _run(law, steps, single=True, traceable=True):
+def _run(law, steps, traceable=True):
     loop = ClosedLoop(Plant(ARM, PHI), law, 2, monitored=True)
     step = RK4Step(loop, 1e-3, 1e6)
     z0 = loop.start(np.zeros(4), np.asarray(law.initial_state(np.zeros(2), np.zeros(2)), dtype=float))
-    return Run(step, step.start(z0), step.feed(sinusoid(2)), steps, single, traceable)
+    return Run(step, step.start(z0), step.feed(sinusoid(2)), steps, traceable)
 
 
 @pytest.fixture
@@ -80,15 +80,12 @@ def test_c_refuses_without_a_compiler(no_compiler):
     assert str(BACKENDS["c"].refuses(_run(_law(), AUTO_MIN_STEPS))).startswith("simulation.backend: no C compiler")
 
 
-@pytest.mark.parametrize("steps, single, expected", [
-    (AUTO_MIN_STEPS - 1, True, "numpy"), (AUTO_MIN_STEPS, True, "c"),
-    (AUTO_MIN_STEPS - 1, False, "numpy"), (AUTO_MIN_STEPS, False, "jax"),
-])
-def test_auto_takes_numpy_for_short_runs_c_for_long_single_ones_and_jax_for_batches(compiler, steps, single,
-                                                                                   expected):
+@pytest.mark.parametrize("steps, expected", [(AUTO_MIN_STEPS - 1, "numpy"), (AUTO_MIN_STEPS, "c")])
+def test_auto_takes_numpy_for_short_runs_and_c_for_long_ones(compiler, steps, expected):
+    """A batch too: its runs each go through the single run's C program (driver._each_run), faster than JAX's."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert choose("auto", _run(_law(), steps, single)).name == expected
+        assert choose("auto", _run(_law(), steps)).name == expected
 
 
 def test_auto_takes_jax_for_a_long_single_run_without_a_compiler_and_numpy_for_a_declared_untraceable_model(

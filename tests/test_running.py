@@ -11,7 +11,7 @@ from robotadapt.analysis.metrics import metrics
 from robotadapt.controllers import InertiaRelated
 from robotadapt.plant import Plant
 from robotadapt.robots import TwoLinkArm
-from robotadapt.sim import RK4, Sampled, simulate, simulate_batch
+from robotadapt.sim import RK4, Sampled, running, simulate, simulate_batch
 from robotadapt.studies.scenarios import load
 from robotadapt.trajectories import sinusoid
 
@@ -75,19 +75,49 @@ def test_the_issues_numbers_no_longer_change_with_the_log() -> None:
     assert max(runs[1]["max_abs_torque"]) > 600
 
 
-def test_a_stopped_run_folds_its_valid_steps_only() -> None:
-    """A run that diverges keeps the metrics of the steps it logged (the step that produced the runaway state too)."""
+@pytest.mark.parametrize("backend", ["numpy", "c"])
+def test_a_stopped_run_folds_its_valid_steps_only(backend) -> None:
+    """A run that diverges keeps the metrics of the steps it logged (the step that produced the runaway state too); C
+    folds in its loop (running.fold_step), numpy a few steps at a time (fold_rows)."""
     law = InertiaRelated(ARM, Lam=2.5, Kv=10, Gamma=20, phi_hat0=[0, 0])
     every = simulate(Plant(ARM, PHI), law, sinusoid(2), t_final=3.0, integrator=RK4(1e-3, backend="numpy"),
                      max_state=3.0)
     assert every.status.startswith("diverged")
-    thinned = simulate(Plant(ARM, PHI), law, sinusoid(2), t_final=3.0, integrator=RK4(1e-3, backend="numpy"),
+    thinned = simulate(Plant(ARM, PHI), law, sinusoid(2), t_final=3.0, integrator=RK4(1e-3, backend=backend),
                        max_state=3.0, log_every=7)
-    assert_equal(metrics(thinned), by_hand(every))
+    assert thinned.status == every.status
+    assert_equal(metrics(thinned), by_hand(every), rtol=1e-12 if backend == "numpy" else 1e-9)
+
+
+def test_one_step_folds_as_a_call_of_steps() -> None:
+    """fold_step (the C loop's, one step at a time) equals fold_rows (the host's, a call's steps at once) on rows with
+    invalid steps, clipped torques and an error that rises, falls and rises again, folded in two calls."""
+    rng = np.random.default_rng(3)
+    steps, m, n = 40, 3, 2
+    e = rng.normal(size=(steps, 2, m)) * np.exp(-np.arange(steps) / 8)[:, None, None]
+    e[30] *= 50  # a late rise: convergence_time moves
+    tau = rng.normal(size=(steps, 2, n))
+    commanded = np.where(rng.random((steps, 2, n)) < 0.3, tau + 1.0, tau)
+    ok = rng.random((steps, 2)) < 0.8
+    ok[:3, 1] = False  # a run whose first steps are invalid: `first` is its first valid one
+    rows = np.concatenate([e, tau, commanded, ok[..., None].astype(float)], axis=-1)
+    ks = np.arange(100, 100 + steps)
+    hosted = running.fold_rows(running.fold_rows(running.start(np, (2,), n, m), rows[:17], ks[:17]), rows[17:],
+                               ks[17:])
+    stepped = running.start(np, (2,), n, m)
+    for row, k in zip(rows, ks, strict=True):
+        stepped = running.fold_step(stepped, row, k)
+    for name, a, b in zip(running.Running._fields, hosted, stepped, strict=True):
+        np.testing.assert_allclose(b, a, rtol=1e-13, err_msg=name)
+    for i in range(2):
+        assert running.values(running.run(stepped, i), 1e-3)["convergence_time"] == pytest.approx(
+            running.values(running.run(hosted, i), 1e-3)["convergence_time"])
 
 
 @pytest.mark.parametrize("integrator", [RK4(1e-3, backend="jax"), Sampled(2e-3, backend="jax"),
-                                        RK4(1e-3, backend="numpy")], ids=["rk4-jax", "sampled-jax", "rk4-numpy"])
+                                        RK4(1e-3, backend="numpy"), RK4(1e-3, backend="c"),
+                                        Sampled(2e-3, backend="c")],
+                         ids=["rk4-jax", "sampled-jax", "rk4-numpy", "rk4-c", "sampled-c"])
 def test_a_batch_folds_each_run_as_its_single_run(integrator) -> None:
     law = InertiaRelated(ARM, Lam=2.5, Kv=10, Gamma=20, phi_hat0=[0, 0])
     plants = [Plant(ARM, PHI), Plant(ARM, 1.2 * PHI)]

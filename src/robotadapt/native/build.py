@@ -35,7 +35,13 @@ INSTALL = "install one (Debian/Ubuntu: apt-get install gcc; macOS: xcode-select 
 
 def compiler() -> str | None:
     """The C compiler's path: `$CC` (a name on PATH or a path), else `cc`; None when there is none."""
-    return shutil.which((os.environ.get("CC", "").strip() or "cc").split()[0])
+    return _which((os.environ.get("CC", "").strip() or "cc").split()[0], os.environ.get("PATH", os.defpath))
+
+
+@cache
+def _which(name: str, path: str) -> str | None:
+    """`shutil.which`, once per name and PATH (a sweep asks at every run)."""
+    return shutil.which(name, path=path)
 
 
 def require_compiler(field: str) -> str:

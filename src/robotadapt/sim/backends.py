@@ -37,14 +37,13 @@ class NotTraceableWarning(UserWarning):
 class Run:
     """What the backends are asked about: a fixed step of the run's closed loop (an RK4Step, for a sampled run too: the
     laws' and models' code a compiled program traces), its carry before step 0 and its feed (the driver's); the steps
-    the run takes (× runs for a batch); whether it is a single run; whether its models are traceable as they declare
+    the run takes (× runs for a batch); whether its models are traceable as they declare
     (`Model.traceable`: False for compiled code such as Pinocchio's)."""
 
     step: Any
     carry: Any
     feed: Feed
     steps: int
-    single: bool = False
     traceable: bool = True
 
 
@@ -152,9 +151,10 @@ def check_backend(backend: Any) -> str:
 
 def choose(asked: str, run: Run) -> Backend:
     """The backend `run` takes: the one `asked` for by name, or its refusal raised. "auto": numpy for a run of fewer
-    than `AUTO_MIN_STEPS` steps or with a model declared untraceable; else C for a single run where C does not refuse
-    (a compiler is present: one native call per chunk, no JAX to import once its program is stored), JAX where it does
-    not refuse (a batch, or no compiler), else numpy with a NotTraceableWarning saying why."""
+    than `AUTO_MIN_STEPS` steps or with a model declared untraceable; else C where it does not refuse (a compiler is
+    present: one native call per chunk, a batch's runs each through the single run's program, no JAX to import once
+    the program is stored), JAX where it does not refuse (no compiler), else numpy with a NotTraceableWarning saying
+    why."""
     if asked != "auto":
         backend = BACKENDS[asked]
         refusal = backend.refuses(run)
@@ -163,7 +163,7 @@ def choose(asked: str, run: Run) -> Backend:
         return backend
     if run.steps < AUTO_MIN_STEPS or not run.traceable:
         return BACKENDS["numpy"]
-    if run.single and BACKENDS["c"].refuses(run) is None:
+    if BACKENDS["c"].refuses(run) is None:
         return BACKENDS["c"]
     refusal = BACKENDS["jax"].refuses(run)
     if refusal is None:

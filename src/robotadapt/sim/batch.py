@@ -21,7 +21,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from .. import pytree
+from .. import pytree, trajectories
 from ..grid import Grid
 from ..plant.plant import Plant
 from ..pytree import Module
@@ -289,6 +289,11 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
     asked = Run(rk4, (z0, line), feed, n_steps * len(controllers), traceable=traceable)
 
     def run(backend: str) -> Any:
+        if backend == "c" and all(map(trajectories.traceable, runs.trajectories)):  # each run through the single-run program
+            own = [RK4Step(single.loop, dt, max_state, tr) for single, tr in zip(singles, runs.trajectories, strict=True)]
+            carries = [step.start(z0[i], buffers[i]) for i, step in enumerate(own)]
+            return drive(own, carries, own[0].feed(runs.trajectories[0]), n_steps, log_every, backend=backend,
+                         mapped=False)
         return drive(singles, [], feed, n_steps, log_every, backend=backend, stacked=(rk4, (z0, line)),
                      progress=progress)
 

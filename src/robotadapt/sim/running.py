@@ -119,6 +119,33 @@ def fold_rows(acc: Running, rows: Array, ks: Array) -> Running:
                    np.where(any_ok, only(ok, k, -1.0).max(axis=-1), acc.k_last))
 
 
+def fold_step(acc: Running, row: Array, k: Array) -> Running:
+    """`acc` with one step's :func:`row` folded (array API): the fold a C program runs in its loop, where a step's few
+    operations cost nanoseconds (XLA would run each as a kernel). The same numbers as :func:`fold_rows` but for the
+    order of the additions (each step added to the sums here, a call's steps summed first there)."""
+    xp = array_namespace(row)
+    m, n = acc.sum_e2.shape[-1], acc.max_abs_tau.shape[-1]
+    e, tau, commanded = row[..., :m], row[..., m : m + n], row[..., m + n : m + 2 * n]
+    ok = row[..., -1] > 0.5
+    e2 = e * e
+    norm2, power = xp.sum(e2, axis=-1), xp.sum(tau * tau, axis=-1)
+    norm = xp.sqrt(norm2)
+    clipped = xp.any(xp.abs(commanded - tau) > 1e-9 * (1.0 + xp.abs(commanded)), axis=-1)
+    kf = xp.asarray(k, dtype=row.dtype) + xp.zeros_like(norm)
+    ends = xp.stack([norm2, power], axis=-1)
+    valid, counted = ok[..., None], xp.where(ok, 1.0, 0.0)
+
+    def peak(old: Array, a: Array) -> Array:
+        return xp.maximum(old, xp.where(valid, xp.abs(a), 0.0))
+
+    max_norm = xp.where(ok, xp.maximum(acc.max_norm, norm), acc.max_norm)
+    return Running(acc.count + counted, acc.sum_e2 + xp.where(valid, e2, 0.0), acc.sum_norm2 + xp.where(ok, norm2, 0.0),
+                   acc.sum_power + xp.where(ok, power, 0.0), xp.where(((acc.count > 0) | ~ok)[..., None], acc.first, ends),
+                   xp.where(valid, ends, acc.last), peak(acc.max_abs_e, e), peak(acc.max_abs_tau, tau),
+                   peak(acc.max_abs_commanded, commanded), acc.saturated + xp.where(ok & clipped, 1.0, 0.0), max_norm,
+                   xp.where(ok & (norm > CONVERGED * max_norm), kf, acc.above), xp.where(ok, kf, acc.k_last))
+
+
 def run(acc: Running, i: int) -> Running:
     """Run i's fold, of a fold with a leading run axis."""
     return Running(*(a[i] for a in acc))

@@ -199,7 +199,7 @@ def simulate(plant: Plant, controller: Law, trajectory: Trajectory, *, t_final: 
                               f"use a larger {name.split('.')[1]} or simulation.log_every")
         step = RK4Step(loop, h, max_state)  # a step of the loop: what the backends are asked about (sampled runs too)
         asked = Run(step, step.start(z0, None if line is None else line.buffer), step.feed(trajectory), n_steps,
-                    single=True, traceable=plant.model.traceable and controller.model.traceable)
+                    traceable=plant.model.traceable and controller.model.traceable)
 
         def run(backend: str) -> tuple[Array, Array, Status, dict[str, Any], dict[str, Array] | None]:
             if isinstance(integrator, Sampled):
