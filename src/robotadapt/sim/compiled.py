@@ -65,8 +65,15 @@ def native_map(fn: Callable[..., dict[str, Any]], obj: Any, static: Any, samples
            tuple((np.shape(a), np.asarray(a).dtype.str) for a in leaves))
 
     def program(arrays: Any, *args: Any) -> tuple[Any, ...]:
-        out = fn(pytree.unflatten(structure, arrays), static, *args)
-        return tuple(out[k] for k in sorted(out) if out[k] is not None)
+        """The maps at one instant, looped over the chunk's (a C loop of scalar code: the maps on whole columns would
+        keep hundreds of 2048-long temporaries, out of the cache)."""
+        obj = pytree.unflatten(structure, arrays)
+
+        def instant(row: tuple[Any, ...]) -> tuple[Any, ...]:
+            out = fn(obj, static, *row)
+            return tuple(out[k] for k in sorted(out) if out[k] is not None)
+
+        return jax_module().lax.map(instant, args)
 
     @float64
     def build_it() -> tuple[Any, Any] | None:  # None: the maps hold host-side code (remembered, not traced again)
@@ -92,12 +99,11 @@ def native_map(fn: Callable[..., dict[str, Any]], obj: Any, static: Any, samples
         raise ConfigError("simulation.backend", "the records hold code C cannot run: evaluated by numpy")
     native, (layout, names) = found_program
 
-    def chunk(i: int) -> list[np.ndarray]:
-        rows = [a[i * RECORD_CHUNK : (i + 1) * RECORD_CHUNK] for a in whole if a is not None]
-        return native(*leaves, *rows)
-
-    parts = [chunk(i) for i in range(chunks)]
-    return {name: np.concatenate([p[layout[j]] for p in parts])[:count] for j, name in enumerate(names)}
+    results = [np.empty((chunks * RECORD_CHUNK,) + s[1:], d) for s, d in native.outs]  # each call writes its rows
+    for i in range(chunks):
+        rows = slice(i * RECORD_CHUNK, (i + 1) * RECORD_CHUNK)
+        native(*leaves, *(a[rows] for a in whole if a is not None), out=[r[rows] for r in results])
+    return {name: results[layout[j]][:count] for j, name in enumerate(names)}
 
 
 def stable_key(key: Any) -> str | None:
