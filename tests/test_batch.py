@@ -297,12 +297,15 @@ def test_outputs_evaluated_by_jax_equal_the_numpy_ones(name, monkeypatch):
 # Sampled-data runs batch too (issue 23): one program mapped over the runs, or numpy run by run
 
 
-@pytest.mark.parametrize("backend", ["numpy", "jax"])
-def test_sampled_runs_batch_and_each_equals_its_single_run(backend):
+@pytest.mark.parametrize("backend", ["numpy", "jax", "c"])
+def test_sampled_runs_batch_and_each_equals_its_single_run(backend, monkeypatch):
     """Example 6.3.1 at Ts = 2 ms with Kv drawn per run, an actuator limit and a noisy encoder with a seed per run: each
-    run of the batch is the numpy single run of its own setup (numpy: to 1e-12; compiled and mapped over the runs:
-    to 1e-9), its logged torques, measurements and tick-sum passivity included."""
-    from robotadapt.sim import Sampled
+    run of the batch is the numpy single run of its own setup (numpy: to 1e-12; compiled and mapped over the runs, or
+    each run through its C program: to 1e-9), its logged torques, measurements and tick-sum passivity included. C in
+    calls of 64 ticks: the runs go through the calls in lockstep, each call's noise drawn once for all runs."""
+    from robotadapt.sim import Sampled, driver
+
+    monkeypatch.setattr(driver, "CHUNK_STEPS", 64)
 
     kvs = (5.0, 12.5, 20.0)
     sets = ["simulation.control_period=0.002", "simulation.t_final=0.6", "plant.torque_limit=60", "plant.noise_q=1e-4"]

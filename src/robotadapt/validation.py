@@ -33,13 +33,16 @@ def as_array(value: Any, field: str) -> Array:
     """A finite float64 array, or a ConfigError naming `field`."""
     if isinstance(value, bool | np.bool_ | str | bytes) or value is None:
         raise ConfigError(field, f"expected a number or a list of numbers, got {_show(value)}")
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ConfigError(field, f"expected a number or a list of numbers, got {_show(value)}") from None
-    if np.asarray(value).dtype == bool:
-        raise ConfigError(field, f"expected numbers, got true/false values: {_show(value)}")
-    if arr.dtype == object or not np.all(np.isfinite(arr)):
+    if isinstance(value, np.ndarray) and value.dtype == float:  # already numbers (a gain set by code): no conversion
+        arr = value
+    else:
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise ConfigError(field, f"expected a number or a list of numbers, got {_show(value)}") from None
+        if np.asarray(value).dtype == bool:
+            raise ConfigError(field, f"expected numbers, got true/false values: {_show(value)}")
+    if not np.isfinite(arr).all():
         raise ConfigError(field, f"every entry must be a finite number, got {_show(value)}")
     return arr
 
@@ -100,9 +103,10 @@ def as_gain(value: Any, n: int, field: str, *, semidefinite: bool = False) -> Ar
 
 def check_spd(arr: Array, field: str, semidefinite: bool = False) -> None:
     """Raise unless `arr` is symmetric positive definite (or semidefinite)."""
-    if not np.allclose(arr, arr.T, rtol=1e-10, atol=1e-12 * max(1.0, float(np.abs(arr).max()))):
+    diagonal = np.count_nonzero(arr) == np.count_nonzero(np.diagonal(arr))  # the usual gain: symmetric, its
+    # eigenvalues its diagonal
+    if not diagonal and not np.allclose(arr, arr.T, rtol=1e-10, atol=1e-12 * max(1.0, float(np.abs(arr).max()))):
         raise ConfigError(field, f"must be symmetric, got {_show(arr)}")
-    diagonal = not np.any(arr - np.diag(np.diagonal(arr)))  # the usual gain: its eigenvalues are its diagonal
     eig = np.sort(np.diagonal(arr)) if diagonal else np.linalg.eigvalsh(arr)
     if semidefinite and eig.min() < -1e-12 * max(1.0, float(eig.max())):
         raise ConfigError(field, f"must be positive semidefinite (smallest eigenvalue {eig.min():.3g})")

@@ -301,8 +301,6 @@ def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, 
     that meets code needing concrete values (numpy-only code) is a ConfigError naming `simulation.backend` and the
     law."""
     try:
-        if native and mapped is not None:
-            return _each_run(runs, carry, feed, n, log_every, mapped)
         run = _compiled if native else float64(_compiled)  # C: JAX only where a program is traced
         return run(runs, transition, carry, feed, n, log_every, mapped, native)
     except ConfigError:
@@ -314,32 +312,33 @@ def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, 
                           f"{(str(exc).splitlines() or [''])[0][:120]}); use backend = 'numpy'") from None
 
 
-def _each_run(runs: Sequence[Any], carry: Any, feed: Feed, n: int, log_every: int,
-              mapped: Any) -> tuple[Any, Array, Array, Array, Any, running.Running]:
-    """Mapped runs as C: each run through the single run's program (the one `robotadapt run` builds: found on disk by
-    every sweep worker), the runs one after another. A run's steps stay in the cache; the same runs vmapped into one
-    program loop over the runs inside every operation (Example 6.3.1: 5.7 ms a run against 3.5 ms, and its per-step
-    rows for all runs at once)."""
-    outs = []
-    for i, one in enumerate(runs):
-        own = map_tree(lambda a: a[i], carry)  # noqa: B023
-        outs.append(_compiled([one], one, own, lambda first, count: take_run(feed(first, count), i, mapped),  # noqa: B023
-                              n, log_every, None, True))
-    records, valid, k_stop, why, bad, acc = zip(*outs, strict=True)
-    T = max(len(v) for v in valid)  # a run that stopped left its last calls out: its rows end early
+@dataclass
+class _Lane:
+    """One compiled program's share of a loop: its transition, arguments and state, and what its calls returned."""
 
-    def rows(*parts: Array) -> Array:
-        return np.stack([np.concatenate([a, np.repeat(a[-1:], T - len(a), axis=0)]) for a in parts], axis=1)
+    one: Any  # the transition the program is traced from
+    arrays: list[Array]  # its leaves: the program's arguments
+    static: Any  # what the C program is (None: XLA's)
+    axes: Any  # vmap's in_axes (None: not mapped)
+    state: tuple[Any, ...]
+    folded: running.Running
+    records: list[Any]
+    valid: list[Array]
 
-    valid = tuple(np.concatenate([v, np.zeros(T - len(v), bool)]) for v in valid)
-    return (map_tree(rows, *records), np.stack(valid, axis=1), np.stack(k_stop),
-            np.stack(why), None if bad[0] is None else map_tree(lambda *a: np.stack(a), *bad),
-            map_tree(lambda *a: np.stack(a), *acc))
+    def outputs(self) -> tuple[Any, Array, Array, Array, Any, running.Running]:
+        out = map_tree(lambda *a: np.concatenate(a), *self.records)
+        bad = None if self.state[4] is None else map_tree(np.asarray, self.state[4])
+        return out, np.concatenate(self.valid), np.asarray(self.state[2]), np.asarray(self.state[3]), bad, self.folded
 
 
 def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
               mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any, running.Running]:
+    """:func:`_scan`'s loop. Mapped runs as C (`each`): each run through the single run's program (the one `robotadapt
+    run` builds, found on disk by every sweep worker), the runs in lockstep over the calls (the inputs fed once a call).
+    A run's steps stay in the cache: the runs vmapped into one program would loop over the runs inside every operation
+    (Example 6.3.1: 5.7 ms a run against 3.5 ms)."""
     jnp = np if native else jax_module().numpy  # the C program takes host arrays as they are
+    each = native and mapped is not None
     if mapped is not None:
         key = pytree.key(runs[0])
         for other in runs[1:]:
@@ -347,53 +346,72 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
                 raise ConfigError("simulation", "the runs differ in more than their arrays (a law's kind, a flag, a "
                                   "scalar setting); one batch of sampled-data runs varies gains, tables and true "
                                   "parameters only")
-        arrays = [jnp.asarray(np.stack(parts)) for parts in zip(*(pytree.leaves(r) for r in runs), strict=True)]
-        shape: tuple[int, ...] = (len(runs),)
-        axes = _axes(mapped)
-    else:
-        leaves, key = pytree.flatten(transition)
-        arrays = [jnp.asarray(a) for a in leaves]
-        shape, axes = _runs_shape(carry), None
+    shape: tuple[int, ...] = (len(runs),) if mapped is not None else _runs_shape(carry)
     one = transition if mapped is None else runs[0]
-    static = (key, log_every, axes) if native else None  # what the C program is
-    probe = feed(0, 1)
-    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(probe)) + 8 * int(np.prod(shape)) * (
-        one.loop.controller.error_size + 2 * one.loop.n + 1)
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
+    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(feed(0, 1))) + 8 * int(np.prod(shape)) * (
+        one.loop.controller.error_size + 2 * one.loop.n + 1)
     most = max(1, int(min(CHUNK_STEPS, INPUT_BYTES // max(step_bytes, 1))) // log_every)
     # XLA: a power of two, few shapes and compilations; C: one shape per program whatever the run's length (gcc builds
     # a large program once, not per t_final)
     per_call = most if native else min(most, 1 << max(0, blocks - 1).bit_length())
-    one_carry = carry if mapped is None else map_tree(lambda a: a[0], carry)
-    lead = shape if not _runs_shape(one_carry) else ()  # a mapped run's carry has no run axes; a stacked one has
-    bad = map_tree(lambda a: jnp.zeros(lead + np.shape(a)), one.blanks(one_carry)[1])
-    folded = running.start(np, shape, one.loop.n, one.loop.controller.error_size)
-    state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int), bad,
-             *((folded,) if native else ()))  # C folds the running metrics in its loop
-    records, valid = [], []
+
+    def lane(one: Any, arrays: list[Array], key: Any, carry: Any, shape: tuple[int, ...], axes: Any) -> _Lane:
+        one_carry = carry if axes is None else map_tree(lambda a: a[0], carry)
+        lead = shape if not _runs_shape(one_carry) else ()  # a mapped run's carry has no run axes; a stacked one has
+        bad = map_tree(lambda a: jnp.zeros(lead + np.shape(a)), one.blanks(one_carry)[1])
+        folded = running.start(np, shape, one.loop.n, one.loop.controller.error_size)
+        state = (map_tree(jnp.asarray, carry), jnp.ones(shape, bool), jnp.zeros(shape, int), jnp.zeros(shape, int),
+                 bad, *((folded,) if native else ()))  # C folds the running metrics in its loop
+        return _Lane(one, arrays, (key, log_every, axes) if native else None, axes, state, folded, [], [])
+
+    if each:
+        lanes = []
+        for i, r in enumerate(runs):
+            leaves, key = pytree.flatten(r)
+            lanes.append(lane(r, leaves, key, map_tree(lambda a: a[i], carry), (), None))  # noqa: B023
+    elif mapped is not None:
+        arrays = [jnp.asarray(np.stack(parts)) for parts in zip(*(pytree.leaves(r) for r in runs), strict=True)]
+        lanes = [lane(one, arrays, key, carry, shape, _axes(mapped))]
+    else:
+        leaves, key = pytree.flatten(transition)
+        lanes = [lane(one, [jnp.asarray(a) for a in leaves], key, carry, shape, None)]
+    live = list(range(len(lanes)))
     for first in range(0, blocks, per_call):
         size = per_call * log_every
         real = min(size, n + 1 - first * log_every)
-        xs = map_tree(lambda a: np.concatenate([a, np.zeros((size - real,) + a.shape[1:], a.dtype)]),  # noqa: B023
-                  feed(first * log_every, real))  # the padding: zeros, with its step indices after n (not computed)
-        xs = xs._replace(k=np.arange(first * log_every, first * log_every + size))
-        xs = _blocked(xs, mapped, per_call, log_every)
-        move = partial(_rows, keep=min(per_call, blocks - first), runs_first=mapped is not None)
-        if native:
-            state, (record, ok) = _native(lambda: _program(one, log_every, axes, True), static, arrays, state, xs, n)
-            folded = state[5]
-        else:
-            state, (record, ok, rows) = _program(one, log_every, axes)(arrays, state, xs, n)
-            steps = np.asarray(rows) if mapped is None else np.moveaxis(np.asarray(rows), 0, 2)  # (blocks, L, runs, w)
-            folded = running.fold_rows(folded, steps.reshape((-1,) + steps.shape[2:])[:real],  # the padding left out
-                                       np.arange(first * log_every, first * log_every + real))
-        records.append(map_tree(move, record))
-        valid.append(move(ok))
-        if not bool(np.asarray(state[1]).any()):
+        fed = map_tree(lambda a: np.concatenate([a, np.zeros((size - real,) + a.shape[1:], a.dtype)]),  # noqa: B023
+                       feed(first * log_every, real))  # the padding: zeros, with its step indices after n (not computed)
+        fed = fed._replace(k=np.arange(first * log_every, first * log_every + size))
+        for i in live:
+            ln = lanes[i]
+            xs = _blocked(take_run(fed, i, mapped) if each else fed, None if each else mapped, per_call, log_every)
+            move = partial(_rows, keep=min(per_call, blocks - first), runs_first=ln.axes is not None)
+            if native:
+                ln.state, (record, ok) = _native(lambda: _program(ln.one, log_every, ln.axes, True),  # noqa: B023
+                                                 ln.static, ln.arrays, ln.state, xs, n)
+                ln.folded = ln.state[5]
+            else:
+                ln.state, (record, ok, rows) = _program(ln.one, log_every, ln.axes)(ln.arrays, ln.state, xs, n)
+                steps = np.asarray(rows) if ln.axes is None else np.moveaxis(np.asarray(rows), 0, 2)  # (blocks, L, runs, w)
+                ln.folded = running.fold_rows(ln.folded, steps.reshape((-1,) + steps.shape[2:])[:real],  # no padding
+                                              np.arange(first * log_every, first * log_every + real))
+            ln.records.append(map_tree(move, record))
+            ln.valid.append(move(ok))
+        live = [i for i in live if bool(np.asarray(lanes[i].state[1]).any())]
+        if not live:
             break
-    out = map_tree(lambda *a: np.concatenate(a), *records)
-    bad_out = None if state[4] is None else map_tree(np.asarray, state[4])
-    return out, np.concatenate(valid), np.asarray(state[2]), np.asarray(state[3]), bad_out, folded
+    if not each:
+        return lanes[0].outputs()
+    records, valid, k_stop, why, bad, acc = zip(*(ln.outputs() for ln in lanes), strict=True)
+    T = max(len(v) for v in valid)  # a run that stopped left its last calls out: its rows end early
+
+    def rows(*parts: Array) -> Array:
+        return np.stack([np.concatenate([a, np.repeat(a[-1:], T - len(a), axis=0)]) for a in parts], axis=1)
+
+    valid = tuple(np.concatenate([v, np.zeros(T - len(v), bool)]) for v in valid)
+    return (map_tree(rows, *records), np.stack(valid, axis=1), np.stack(k_stop), np.stack(why),
+            None if bad[0] is None else map_tree(lambda *a: np.stack(a), *bad), map_tree(lambda *a: np.stack(a), *acc))
 
 
 def _rows(a: Array, keep: int, runs_first: bool) -> Array:
