@@ -349,8 +349,8 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     shape: tuple[int, ...] = (len(runs),) if mapped is not None else _runs_shape(carry)
     one = transition if mapped is None else runs[0]
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
-    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(feed(0, 1))) + 8 * int(np.prod(shape)) * (
-        one.loop.controller.error_size + 2 * one.loop.n + 1)
+    rows = 0 if native else 8 * int(np.prod(shape)) * (one.loop.controller.error_size + 2 * one.loop.n + 1)  # C folds
+    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(feed(0, 1))) + rows
     most = max(1, int(min(CHUNK_STEPS, INPUT_BYTES // max(step_bytes, 1))) // log_every)
     # XLA: a power of two, few shapes and compilations; C: one shape per program whatever the run's length (gcc builds
     # a large program once, not per t_final)
