@@ -178,3 +178,35 @@ def test_the_records_of_a_c_run_are_computed_in_c_and_equal_numpys(name):
     for field in ("tau", "V", "r", "phi_hat", "q_des", "e"):
         a, b = getattr(c, field), getattr(ref, field)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * max(1.0, float(np.abs(b).max())), err_msg=field)
+
+
+def test_auto_runs_jax_while_a_long_c_program_builds_in_the_background(tmp_path, monkeypatch):
+    """Under "auto", a C program over BACKGROUND_LINES lines (an n-DOF arm's: gcc takes 10–60 s) is built by a compiler
+    process of its own: the run goes to JAX without a warning, and a run once the library is there to C, with the same
+    numbers; backend "c" waits for its build."""
+    import time
+    import warnings
+
+    from robotadapt.native import build
+    from robotadapt.tracing import PROGRAMS
+
+    monkeypatch.setenv("ROBOTADAPT_CACHE", str(tmp_path))
+    monkeypatch.setattr(build, "BACKGROUND_LINES", 0)
+    monkeypatch.setattr(PROGRAMS, "items", {})  # no program of an earlier test in this process
+    scenario = load("example-6.3.1", ["simulation.t_final=2.5"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        first = scenario.run()
+    assert first.info["backend"] == "jax"
+    folder = build.cache_dir()
+    for _ in range(240):  # the compiler process writes the library whole, then removes its marker
+        if list(folder.glob("*.so")) and not list(folder.glob("*.building")):
+            break
+        time.sleep(0.25)
+    second = scenario.run()
+    assert second.info["backend"] == "c"
+    np.testing.assert_allclose(second.q, first.q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(second.x, first.x, rtol=0, atol=1e-12)
+    monkeypatch.setattr(PROGRAMS, "items", {})
+    other = load("example-6.3.1", ["simulation.t_final=0.7", "simulation.backend='c'", "simulation.log_every=7"]).run()
+    assert other.info["backend"] == "c"  # a program of its own (log_every), built while the run waited

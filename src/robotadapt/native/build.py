@@ -12,10 +12,13 @@ import ctypes
 import hashlib
 import os
 import pickle
+import shlex
 import shutil
 import subprocess
 import tempfile
+import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -25,11 +28,16 @@ import numpy as np
 from ..tracing import float64, jax_module
 from ..validation import ConfigError
 from .c99 import c_type, translate
+from .patience import Building, patient
 
 # -O2 without the passes that grow superlinearly on one long function (partial redundancy elimination, value range
 # propagation, global CSE): the Panda's RK4 chunk (28 000 lines) builds in 32 s instead of 94 s
 CFLAGS = ("-O2", "-fno-tree-pre", "-fno-tree-vrp", "-fno-gcse", "-fno-thread-jumps", "-std=c99", "-fPIC", "-shared")
 PRELUDE = "#include <math.h>\n#include <stdint.h>\n#include <stddef.h>\n#include <string.h>\n\n"
+#: a translated program longer than this (lines) is built by a compiler process of its own where the caller need not
+#: wait (`patience(False)`): an n-DOF arm's loop, for which gcc takes 10–60 s (the two-link arm's: 800 lines, 1 s)
+BACKGROUND_LINES = 5000
+STALE = 900.0  # s after which a background build's marker is taken for one whose process died
 INSTALL = "install one (Debian/Ubuntu: apt-get install gcc; macOS: xcode-select --install) or point CC at it"
 
 
@@ -56,8 +64,23 @@ def cache_dir() -> Path:
     return Path(os.environ.get("ROBOTADAPT_CACHE", Path.home() / ".cache" / "robotadapt")) / "c"
 
 
+@dataclass(frozen=True)
+class Later:
+    """A program whose library a compiler process is building: what loads it once built."""
+
+    path: Path
+    name: str
+    ins: list[tuple[tuple[int, ...], Any]]
+    outs: list[tuple[tuple[int, ...], Any]]
+
+    def load(self) -> Compiled | None:
+        """The program, or None while its library is not there yet."""
+        return Compiled(self.path, self.name, self.ins, self.outs) if self.path.exists() else None
+
+
 def shared_library(source: str, field: str = "simulation.backend") -> Path:
-    """The shared library of the C `source`, compiled once per source and compiler (module docstring)."""
+    """The shared library of the C `source`, compiled once per source and compiler (module docstring); built in the
+    background (:class:`Building` raised) for a long source within `patience(False)`."""
     cc = require_compiler(field)
     key = hashlib.sha256("\0".join([cc, *CFLAGS, source]).encode()).hexdigest()[:32]
     folder = cache_dir()
@@ -65,6 +88,9 @@ def shared_library(source: str, field: str = "simulation.backend") -> Path:
     if path.exists():
         return path
     folder.mkdir(parents=True, exist_ok=True)
+    if not patient() and source.count("\n") > BACKGROUND_LINES:
+        _build_later(cc, source, path)
+        raise Building(field, f"its C program ({source.count(chr(10))} lines) is being built in the background", path)
     with tempfile.TemporaryDirectory(dir=folder) as tmp:
         c_file, so_file = Path(tmp) / "program.c", Path(tmp) / "program.so"
         c_file.write_text(source, encoding="utf-8")
@@ -74,6 +100,26 @@ def shared_library(source: str, field: str = "simulation.backend") -> Path:
             raise ConfigError(field, f"the C compiler {cc} failed on the translated program: {first}")
         os.replace(so_file, path)
     return path
+
+
+def _build_later(cc: str, source: str, path: Path) -> None:
+    """Start a compiler process of its own (it outlives this one) that writes the library to `path` whole (built
+    under a temporary name, renamed); none when one is under way for it (its marker younger than `STALE` s)."""
+    marker = path.with_suffix(".building")
+    try:
+        os.close(os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        if time.time() - marker.stat().st_mtime < STALE:
+            return
+        marker.unlink(missing_ok=True)  # a build that never ended (its process killed): started again next time
+        return
+    tmp = Path(tempfile.mkdtemp(dir=path.parent))
+    (tmp / "program.c").write_text(source, encoding="utf-8")
+    so = tmp / "program.so"
+    command = " ".join(shlex.quote(a) for a in [cc, *CFLAGS, "-o", str(so), str(tmp / "program.c"), "-lm"])
+    script = f"({command} && mv {shlex.quote(str(so))} {shlex.quote(str(path))}; rm -rf {shlex.quote(str(tmp))} " \
+             f"{shlex.quote(str(marker))}) >/dev/null 2>&1 &"  # the shell returns at once, its child builds on
+    subprocess.run(["sh", "-c", script], start_new_session=True, stdin=subprocess.DEVNULL, check=False)
 
 
 def entry(name: str, n_in: int, n_out: int, types: Sequence[str]) -> str:
@@ -112,7 +158,11 @@ class Compiled:
         outs = [(tuple(v.aval.shape), np.dtype(v.aval.dtype)) for v in jaxpr.outvars]
         types = [c_type(d) for _, d in ins + outs]
         source = PRELUDE + translate(closed, f"{name}_impl", zeros=zeros) + entry(name, len(ins), len(outs), types)
-        return cls(shared_library(source, field), name, ins, outs)
+        try:
+            return cls(shared_library(source, field), name, ins, outs)
+        except Building as building:
+            building.later = Later(building.path, name, ins, outs)
+            raise
 
     def __call__(self, *args: Any, out: Sequence[np.ndarray] | None = None) -> list[np.ndarray]:
         """The outputs, new arrays or written into `out` (C-contiguous arrays of the outputs' shapes and dtypes)."""
@@ -186,12 +236,29 @@ def traced(fn: Callable[..., Any], *args: Any) -> tuple[Any, Any]:
     return closed, outputs
 
 
-def compiled(fn: Callable[..., Any], *args: Any, name: str = "program",
-             zeros: Sequence[np.ndarray | None] = ()) -> tuple[Compiled, Any]:
+_LATER: dict[Any, tuple[Later, Any]] = {}  # programs this process saw go to a background build, by their key
+
+
+def compiled(fn: Callable[..., Any], *args: Any, name: str = "program", zeros: Sequence[np.ndarray | None] = (),
+             key: Any = None) -> tuple[Compiled, Any]:
     """`fn(*args)` traced (:func:`traced`), translated to C and built: (the native program, its outputs' layout);
-    `zeros`: the leading inputs' elements that are zero in every call (folded by the translator)."""
+    `zeros`: the leading inputs' elements that are zero in every call (folded by the translator). `key` (hashable,
+    what the program is): one this process sent to a background build is loaded once its library is there, or
+    :class:`Building` raised again, without tracing it anew."""
+    if key in _LATER:
+        later, outputs = _LATER[key]
+        program = later.load()
+        if program is None:
+            raise Building("simulation.backend", "its C program is being built in the background", later.path)
+        del _LATER[key]
+        return program, outputs
     closed, outputs = traced(fn, *args)
-    return Compiled.translated(closed, name, zeros=zeros), outputs
+    try:
+        return Compiled.translated(closed, name, zeros=zeros), outputs
+    except Building as building:
+        if key is not None and building.later is not None:
+            _LATER[key] = (building.later, outputs)
+        raise
 
 
 def _arrays(tree: Any) -> list[Any]:

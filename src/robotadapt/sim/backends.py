@@ -175,10 +175,14 @@ def choose(asked: str, run: Run) -> Backend:
 def execute(asked: str, run: Run, go: Callable[[str], T]) -> tuple[T, str]:
     """`go(name)` on the backend :func:`choose` takes, and its name. Under "auto", a C program that fails to build
     is stepped with numpy where JAX refuses the run, and compiled with JAX where the translator lacks one of its
-    primitives, each with a NotTraceableWarning; any other failure is raised."""
+    primitives, each with a NotTraceableWarning; a long C program (an n-DOF arm's) is built by a compiler process of
+    its own while JAX runs this run (:func:`robotadapt.native.build.patience`); any other failure is raised."""
+    from ..native.patience import patience
+
     backend = choose(asked, run)
     try:
-        return go(backend.name), backend.name
+        with patience(asked != "auto"):  # "auto" need not wait for a long C program: JAX runs while gcc builds it
+            return go(backend.name), backend.name
     except ConfigError as failed:
         if asked != "auto" or backend.name != "c":
             raise
@@ -189,11 +193,14 @@ def execute(asked: str, run: Run, go: Callable[[str], T]) -> tuple[T, str]:
 def _instead_of_c(failed: ConfigError, run: Run) -> str:
     """The backend a single run takes under "auto" whose C program failed to build (`failed`), else `failed` raised."""
     from ..native.c99 import Unsupported
+    from ..native.patience import Building
 
     refusal = BACKENDS["jax"].refuses(run)
     if refusal is not None:
         _fell_back(_stepped_with_numpy(refusal))
         return "numpy"
+    if isinstance(failed, Building):  # the same numbers, compiled by XLA in seconds: no warning
+        return "jax"
     if not isinstance(failed, Unsupported):
         raise failed
     _fell_back(f"{failed.reason.split(':')[0]}; compiled with JAX instead (simulation.backend = 'auto')")

@@ -80,7 +80,9 @@ def native_map(fn: Callable[..., dict[str, Any]], obj: Any, static: Any, samples
         try:
             out = jax_module().eval_shape(lambda a, *r: fn(pytree.unflatten(structure, a), static, *r), leaves, *first)
             names = [k for k in sorted(out) if out[k] is not None]
-            native, layout = build.compiled(program, tuple(leaves), *first, name="records")
+            native, layout = build.compiled(program, tuple(leaves), *first, name="records", key=key)
+        except build.Building:  # built in the background: numpy or JAX this time, C once it is there
+            raise
         except Exception:  # tracing met code that needs concrete values, or the translator a form it lacks
             return None
         return native, (layout, names)

@@ -282,7 +282,7 @@ def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: An
         stable = stable_key(key)
         program = build.remembered(stable) if stable is not None else None
         if program is None:
-            program = build.compiled(make(), arrays, state, xs, n, name="chunk", zeros=zeros)
+            program = build.compiled(make(), arrays, state, xs, n, name="chunk", zeros=zeros, key=key)
             if stable is not None:
                 build.remember(stable, *program)
         return program
@@ -349,8 +349,8 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     shape: tuple[int, ...] = (len(runs),) if mapped is not None else _runs_shape(carry)
     one = transition if mapped is None else runs[0]
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
-    rows = 0 if native else 8 * int(np.prod(shape)) * (one.loop.controller.error_size + 2 * one.loop.n + 1)  # C folds
-    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(feed(0, 1))) + rows
+    folds = 0 if native else 8 * int(np.prod(shape)) * (one.loop.controller.error_size + 2 * one.loop.n + 1)  # C: none
+    step_bytes = sum(np.asarray(a).nbytes for a in _flatten(feed(0, 1))) + folds
     most = max(1, int(min(CHUNK_STEPS, INPUT_BYTES // max(step_bytes, 1))) // log_every)
     # XLA: a power of two, few shapes and compilations; C: one shape per program whatever the run's length (gcc builds
     # a large program once, not per t_final)
@@ -406,11 +406,11 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     records, valid, k_stop, why, bad, acc = zip(*(ln.outputs() for ln in lanes), strict=True)
     T = max(len(v) for v in valid)  # a run that stopped left its last calls out: its rows end early
 
-    def rows(*parts: Array) -> Array:
+    def padded(*parts: Array) -> Array:
         return np.stack([np.concatenate([a, np.repeat(a[-1:], T - len(a), axis=0)]) for a in parts], axis=1)
 
     valid = tuple(np.concatenate([v, np.zeros(T - len(v), bool)]) for v in valid)
-    return (map_tree(rows, *records), np.stack(valid, axis=1), np.stack(k_stop), np.stack(why),
+    return (map_tree(padded, *records), np.stack(valid, axis=1), np.stack(k_stop), np.stack(why),
             None if bad[0] is None else map_tree(lambda *a: np.stack(a), *bad), map_tree(lambda *a: np.stack(a), *acc))
 
 

@@ -213,5 +213,8 @@ def simulate(plant: Plant, controller: Law, trajectory: Trajectory, *, t_final: 
         (t, z, status, folded, logged), backend = execute(integrator.backend, asked, run)
         info["backend"] = backend
     wall = time.perf_counter() - wall
-    with np.errstate(all="ignore"):  # a diverged run's last samples may overflow in the recomputed outputs
+    from ..native.patience import patience
+
+    # a diverged run's last samples may overflow in the recomputed outputs; "auto" need not wait for a long C program
+    with np.errstate(all="ignore"), patience(getattr(integrator, "backend", "auto") != "auto"):
         return outputs(loop, trajectory, t, z, status, wall, info, logged, folded)
