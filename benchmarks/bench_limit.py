@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from bench_single_run import naive_rk4, timed
+from bench_single_run import import_seconds_of, naive_rk4, timed
 
 import robotadapt as ra
 from robotadapt.native import build
@@ -57,16 +57,6 @@ def in_c(fn: Callable[[], Any], repeats: int) -> tuple[float, float]:
     finally:
         build.Compiled.__call__ = plain  # type: ignore[method-assign]
     return statistics.median(walls), statistics.median(natives)
-
-
-def fresh(command: list[str], repeats: int) -> float:
-    """Median wall time of a fresh process running `command`."""
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        subprocess.run(command, check=True, capture_output=True)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def sweep(runs: int, extra: tuple[str, ...]) -> tuple[float, float]:
@@ -103,7 +93,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as out:
         command = [*CLI, "run", "example-6.3.1", "--out", out]
         subprocess.run(command, check=True, capture_output=True)  # its programs on disk
-        cli = fresh(command, 5)
+        cli = import_seconds_of(command, 5)
     rows.append(("fresh `robotadapt run example-6.3.1`, figures, warm", cli, loop / cli, "≤ 1.0x slower (≥ 1.0x)"))
     peaks = []
     for extra, what in (((), "continuous"), (("--control-period", "0.002"), "Ts = 2 ms")):
@@ -117,7 +107,7 @@ def main() -> None:
         panda.run()  # built once per cache
         steady = timed(panda.run, 3)[0]
         rows.append(("panda-slotine-li 10 s at 1 kHz, steady", steady, loop / steady, "≤ 0.06 s"))
-        warm = fresh([sys.executable, "-c", PANDA_FRESH], 3)
+        warm = import_seconds_of([sys.executable, "-c", PANDA_FRESH], 3)
         rows.append(("panda-slotine-li 10 s, fresh process, warm", warm, loop / warm, "≤ 2x slower (≥ 0.5x)"))
     print(f"Example 6.3.1, 10 s at 1 kHz: the plain Python RK4 loop {loop:.3f} s in this run; load average "
           f"{os.getloadavg()[0]:.2f}")
