@@ -82,7 +82,7 @@ def test_c_refuses_without_a_compiler(no_compiler):
 
 @pytest.mark.parametrize("steps, expected", [(AUTO_MIN_STEPS - 1, "numpy"), (AUTO_MIN_STEPS, "c")])
 def test_auto_takes_numpy_for_short_runs_and_c_for_long_ones(compiler, steps, expected):
-    """A batch too: its runs each go through the single run's C program (driver._each_run), faster than JAX's."""
+    """A batch too: its runs each go through the single run's C program (driver._compiled, its lanes), faster than JAX's."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert choose("auto", _run(_law(), steps)).name == expected
