@@ -101,7 +101,7 @@ def test_rows_are_the_metrics_of_single_runs(tmp_path):
     s = scenario()
     sw = make_sweep(s, ["controller.phi_hat0=[0,0],[0.5,2]"], ["plant.phi=[0.6,2]:[1,2.6]"], n=2)
     report = run_sweep(sw, tmp_path, workers=1)
-    assert report.computed == 4 and "vectorized" in report.how
+    assert report.computed == 4 and report.how.startswith("batched (simulate_batch")
     rows = read_table(tmp_path / "runs.jsonl")
     assert list(rows) == [0, 1, 2, 3]
     point = list(sw.points())[3]
@@ -130,7 +130,7 @@ def test_sampled_data_runs_are_vectorized_and_each_row_is_its_single_run(tmp_pat
     s = scenario(["simulation.control_period=0.002", "simulation.backend='jax'"])
     sw = make_sweep(s, [], ["controller.Kv=5:20"], n=3)
     report = run_sweep(sw, tmp_path, workers=1)
-    assert report.computed == 3 and report.how == "vectorized (simulate_batch)"
+    assert report.computed == 3 and report.how == "batched (simulate_batch, backend jax)"
     rows = read_table(tmp_path / "runs.jsonl")
     for point in sw.points():
         st = load("example-6.3.1", SHORT + ["simulation.control_period=0.002",

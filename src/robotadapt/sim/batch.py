@@ -297,11 +297,11 @@ def simulate_batch(plant: Plant | Sequence[Plant], controller: Any, trajectory: 
         return drive(singles, [], feed, n_steps, log_every, backend=backend, stacked=(rk4, (z0, line)),
                      progress=progress)
 
-    trace, _ = execute(integrator.backend, asked, run)
+    trace, backend = execute(integrator.backend, asked, run)
     z = trace.records.z
     return BatchResult(grid.times(len(z)), z, trace.n_logged, tuple(trace.status), runs.plants,
-                       controllers, runs.trajectories, time.perf_counter() - wall, dict(info or {}), folded=trace.running,
-                       h=grid.h)
+                       controllers, runs.trajectories, time.perf_counter() - wall, {**(info or {}), "backend": backend},
+                       folded=trace.running, h=grid.h)
 
 
 def _sampled_batch(runs: _Runs, opts: Sampled, t_final: float, log_every: int, max_state: float, progress: bool,

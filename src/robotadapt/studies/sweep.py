@@ -197,7 +197,7 @@ def _metrics(setups: list[Setup]) -> tuple[list[dict[str, Any] | ConfigError], s
                                [s.trajectory for s in setups], t_final=first.t_final, integrator=first.integrator,
                                q0=np.stack([s.q0 for s in setups]), dq0=np.stack([s.dq0 for s in setups]),
                                log_every=log_every(first), max_state=first.max_state)
-        return [metrics(res) for res in batch.runs()], "vectorized (simulate_batch)"
+        return [metrics(res) for res in batch.runs()], f"batched (simulate_batch, backend {batch.info['backend']})"
     except ConfigError as exc:
         how = f"one scenario per run ({exc})"
     out: list[dict[str, Any] | ConfigError] = []
