@@ -103,8 +103,7 @@ def as_gain(value: Any, n: int, field: str, *, semidefinite: bool = False) -> Ar
 
 def check_spd(arr: Array, field: str, semidefinite: bool = False) -> None:
     """Raise unless `arr` is symmetric positive definite (or semidefinite)."""
-    diagonal = np.count_nonzero(arr) == np.count_nonzero(np.diagonal(arr))  # the usual gain: symmetric, its
-    # eigenvalues its diagonal
+    diagonal = np.count_nonzero(arr) == np.count_nonzero(np.diagonal(arr))  # the usual gain: symmetric, eigenvalues seen
     if not diagonal and not np.allclose(arr, arr.T, rtol=1e-10, atol=1e-12 * max(1.0, float(np.abs(arr).max()))):
         raise ConfigError(field, f"must be symmetric, got {_show(arr)}")
     eig = np.sort(np.diagonal(arr)) if diagonal else np.linalg.eigvalsh(arr)

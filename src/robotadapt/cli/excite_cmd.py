@@ -67,29 +67,17 @@ def limit_spec(text: str | None, n: int, option: str, position: bool = False) ->
     return values if position else values[:, 0]
 
 
-def max_iter(text: str | None) -> int | None:
-    """`--max-iter`: a whole number ≥ 1, or None (the library's default)."""
+def positive(text: str | None, option: str, kind: type[int] | type[float], expected: str) -> Any:
+    """`--max-iter` (a whole number ≥ 1) or `--time-budget` (a positive finite number of seconds) as `kind`, or None
+    (not given: the library's default); `expected` words the value in the one-line refusal."""
     if text is None:
         return None
     try:
-        value = int(text)
+        value = kind(text)
     except ValueError:
         value = 0
-    if value < 1:
-        raise ConfigError("--max-iter", f"expected a whole number of iterations ≥ 1, e.g. --max-iter 100; got {text!r}")
-    return value
-
-
-def time_budget(text: str | None) -> float | None:
-    """`--time-budget`: a positive finite number of seconds, or None."""
-    if text is None:
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
     if not 0 < value < float("inf"):
-        raise ConfigError("--time-budget", f"expected a positive number of seconds, e.g. --time-budget 60; got {text!r}")
+        raise ConfigError(option, f"expected {expected}; got {text!r}")
     return value
 
 
@@ -99,7 +87,8 @@ def main(args: argparse.Namespace) -> int:
     from ..studies.scenarios import load
 
     output = figure_format(args)
-    iterations, budget = max_iter(args.max_iter), time_budget(args.time_budget)
+    iterations = positive(args.max_iter, "--max-iter", int, "a whole number of iterations ≥ 1, e.g. --max-iter 100")
+    budget = positive(args.time_budget, "--time-budget", float, "a positive number of seconds, e.g. --time-budget 60")
     scenario = load(args.scenario, list(args.set))
     s = scenario.setup
     model = s.controller.model

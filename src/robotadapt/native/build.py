@@ -167,9 +167,13 @@ class Compiled:
     def __call__(self, *args: Any, out: Sequence[np.ndarray] | None = None) -> list[np.ndarray]:
         """The outputs, new arrays or written into `out` (C-contiguous arrays of the outputs' shapes and dtypes)."""
         ins = [np.ascontiguousarray(np.asarray(a, dtype=d).reshape(s)) for a, (s, d) in zip(args, self.ins, strict=True)]
-        outs = [np.empty(s, dtype=d) for s, d in self.outs] if out is None else list(out)
-        if any(a.shape != s or a.dtype != d or not a.flags.c_contiguous for a, (s, d) in zip(outs, self.outs, strict=True)):
-            raise ValueError("out: C-contiguous arrays of the program's output shapes and dtypes")
+        if out is None:
+            outs = [np.empty(s, dtype=d) for s, d in self.outs]
+        else:
+            outs = list(out)
+            if any(a.shape != s or a.dtype != d or not a.flags.c_contiguous
+                   for a, (s, d) in zip(outs, self.outs, strict=True)):
+                raise ValueError("out: C-contiguous arrays of the program's output shapes and dtypes")
         table = (ctypes.c_void_p * (len(ins) + len(outs)))(*[a.ctypes.data for a in ins + outs])
         self._fn(table)
         return outs

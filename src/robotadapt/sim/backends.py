@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
 from .. import pytree
+from ..native.patience import Building, patience
 from ..tracing import float64, jax_module
 from ..validation import ConfigError
 from .driver import Feed, map_tree
@@ -177,8 +178,6 @@ def execute(asked: str, run: Run, go: Callable[[str], T]) -> tuple[T, str]:
     is stepped with numpy where JAX refuses the run, and compiled with JAX where the translator lacks one of its
     primitives, each with a NotTraceableWarning; a long C program (an n-DOF arm's) is built by a compiler process of
     its own while JAX runs this run (:func:`robotadapt.native.build.patience`); any other failure is raised."""
-    from ..native.patience import patience
-
     backend = choose(asked, run)
     try:
         with patience(asked != "auto"):  # "auto" need not wait for a long C program: JAX runs while gcc builds it
@@ -193,7 +192,6 @@ def execute(asked: str, run: Run, go: Callable[[str], T]) -> tuple[T, str]:
 def _instead_of_c(failed: ConfigError, run: Run) -> str:
     """The backend a single run takes under "auto" whose C program failed to build (`failed`), else `failed` raised."""
     from ..native.c99 import Unsupported
-    from ..native.patience import Building
 
     refusal = BACKENDS["jax"].refuses(run)
     if refusal is not None:

@@ -292,8 +292,6 @@ def _native(make: Callable[[], Any], static: Any, arrays: list[Array], state: An
     return map_tree(lambda i: values[i], outputs)
 
 
-
-
 def _scan(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: int, log_every: int,
           mapped: Any, native: bool = False) -> tuple[Any, Array, Array, Array, Any, running.Running]:
     """The compiled loop: :func:`_python`'s results, from `lax.scan` over blocks of steps (`mapped`: the runs'

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..controllers.base import Law, as_law
 from ..grid import Grid
+from ..native.patience import patience
 from ..plant.plant import Plant, same_model
 from ..trajectories import Trajectory, traceable
 from ..validation import ConfigError, as_scalar, as_vector
@@ -213,8 +214,6 @@ def simulate(plant: Plant, controller: Law, trajectory: Trajectory, *, t_final: 
         (t, z, status, folded, logged), backend = execute(integrator.backend, asked, run)
         info["backend"] = backend
     wall = time.perf_counter() - wall
-    from ..native.patience import patience
-
     # a diverged run's last samples may overflow in the recomputed outputs; "auto" need not wait for a long C program
-    with np.errstate(all="ignore"), patience(getattr(integrator, "backend", "auto") != "auto"):
+    with np.errstate(all="ignore"), patience(integrator.backend != "auto"):
         return outputs(loop, trajectory, t, z, status, wall, info, logged, folded)
