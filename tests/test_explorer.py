@@ -25,6 +25,7 @@ pytest.importorskip("bokeh", reason="the explorer needs the extra [explore]: pip
 
 from robotadapt.cli import main  # noqa: E402
 from robotadapt.explorer.catalogue import Catalogue  # noqa: E402
+from robotadapt.explorer.curves import MAX_POINTS, curves, single, thinned  # noqa: E402
 from robotadapt.explorer.download import FILES, archive  # noqa: E402
 from robotadapt.explorer.runner import Runner  # noqa: E402
 from robotadapt.explorer.server import allowed_hosts, local  # noqa: E402
@@ -172,6 +173,27 @@ def test_the_view_runs_what_robotadapt_run_runs(catalogue, tmp_path):
     assert {k: v for k, v in written.items() if k != "wall_time_s"} == \
         {k: v for k, v in json.loads(json.dumps(run.metrics)).items() if k != "wall_time_s"}
     assert catalogue.run(view) is run  # the same view again: the run kept
+
+
+def test_the_curves_are_the_runs_samples_thinned_in_single_precision(catalogue):
+    for n in (1, 7, 999, 1000, 1001, 10001):
+        keep = thinned(n)
+        assert keep[0] == 0 and keep[-1] == n - 1 and np.all(np.diff(keep) > 0) and keep.size <= MAX_POINTS + 1
+        assert np.ptp(np.diff(keep[:-1])) == 0 if keep.size > 2 else True  # evenly strided but for the last
+    res = catalogue.run(View("example-6.3.1")).result
+    shown = curves(catalogue.run(View("example-6.3.1")))
+    keep = thinned(res.t.size)
+    assert [p.name for p in shown.panels] == ["e", "abs_e", "phi", "tau", "V"]
+    assert shown.data["t"].tolist() == res.t[keep].tolist()
+    for column, values in (("e1", res.e[keep, 1]), ("abs_e0", np.abs(res.e[keep, 0])), ("tau1", res.tau[keep, 1]),
+                           ("phi0", res.phi_hat[keep, 0]), ("V0", res.V[keep])):
+        assert shown.data[column].dtype == np.float32, column
+        finite = np.isfinite(shown.data[column])
+        np.testing.assert_allclose(shown.data[column][finite], values[finite], rtol=1e-7, atol=1e-30, err_msg=column)
+    big = np.array([0.0, 1e-50, -1e-50, 1e50, -1e50, np.nan, -2.25])
+    assert single(big).tolist()[:5] == [0.0, np.finfo(np.float32).tiny, -np.finfo(np.float32).tiny,
+                                        np.finfo(np.float32).max, -np.finfo(np.float32).max]
+    assert np.isnan(single(big)[5]) and single(big)[6] == -2.25
 
 
 def test_only_packaged_scenarios_and_the_command_lines_file(catalogue, tmp_path):

@@ -43,13 +43,16 @@ FIRST = ("status", "rms_error", "rms_error_norm", "final_abs_error", "max_abs_to
 HEADLINE = ("status", "rms_error", "max_abs_torque", "final_phi_error")
 #: the page's URL and its redraw mark, from the state source's data (a source, not a widget: no layout to redo); the
 #: figures paint in the first animation frame after their data came (Bokeh throttles painting to frames), so the mark
-#: is set just after that frame
+#: is set just after that frame, and the server told (`painted`): it sends the run's texts then, not before
 STATE_JS = """
 const url = state.data.url[0], run = state.data.run[0];
 if (url !== window.location.search) { history.replaceState(history.state, '', url); }
 if (run !== window.robotadaptRun) {
   window.robotadaptRun = run;
-  requestAnimationFrame(() => setTimeout(() => { window.robotadaptDrawn = {run: run, t: performance.now()}; }, 0));
+  requestAnimationFrame(() => setTimeout(() => {
+    window.robotadaptDrawn = {run: run, t: performance.now()};
+    painted.data = {run: [run]};
+  }, 0));
 }"""
 DOWNLOAD_JS = "window.location.assign('download' + window.location.search)"
 SLIDER_FORMAT = "return (10 ** tick).toPrecision(3)"
@@ -174,7 +177,10 @@ class Page:
         # a table whose rows stay the same redraws only when its view says so (Bokeh 3 redraws on a change of indices)
         self.table.js_on_change("data", CustomJS(args={"table": self.metrics}, code="table.view.change.emit()"))
         self.state = ColumnDataSource({"url": [self.view.query()], "run": [0]}, name="state")
-        state = CustomJS(args={"state": self.state}, code=STATE_JS)
+        self.painted = ColumnDataSource({"run": [0]}, name="painted")  # the run whose figures the browser painted last
+        self.painted.on_change("data", self._painted)
+        self.unsent: tuple[Shown, Outcome] | None = None  # the texts of the run drawn last, until it is painted
+        state = CustomJS(args={"state": self.state, "painted": self.painted}, code=STATE_JS)
         self.state.js_on_change("data", state)
         doc.js_on_event("document_ready", state)  # a run that ended before the page connected
         pin = Button(label="pin this run", width=170, name="pin", css_classes=["ra-pin"])
@@ -272,19 +278,25 @@ class Page:
         self.closed = True
 
     def _show(self, outcome: Outcome) -> None:
-        """The outcome on the page, its changes sent together: the figures' data (or the refusal), the mark, then the
-        metrics and the headline (the browser paints the figures first)."""
+        """The outcome on the page, its changes sent together: the figures' data (or the refusal) and the mark. The
+        metrics and the headline follow once the browser painted the figures (:meth:`_painted`): they would otherwise
+        be laid out before the figures are painted."""
         self.seconds = outcome.seconds
         if outcome.ticket != self.runner.latest:  # a change came after it ended: its own run is on the way
             return
         self.doc.hold("combine")
         try:
             shown = self._outcome(outcome)
+            self.unsent = None if shown is None else (shown, outcome)
             self.state.data = {"url": self.state.data["url"], "run": [outcome.ticket]}
-            if shown is not None:
-                self._texts(shown, outcome)
         finally:
             self.doc.unhold()
+
+    def _painted(self, attr: str, old: Any, new: dict[str, list[int]]) -> None:
+        """The browser painted a run's figures: its texts, if it is the run drawn last."""
+        if self.unsent is not None and new["run"] == [self.unsent[1].ticket]:
+            (shown, outcome), self.unsent = self.unsent, None
+            self._texts(shown, outcome)
 
     def _outcome(self, outcome: Outcome) -> Shown | None:
         """The run's figures, or its refusal (None)."""

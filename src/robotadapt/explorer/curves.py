@@ -23,8 +23,10 @@ from ..report.figures import (
 from ..studies.compare import number_text
 from .catalogue import Run
 
-#: the samples a curve keeps (every k-th of the run's, the last one too): the browser draws a few thousand points at once
-MAX_POINTS = 2000
+#: the samples a curve keeps (every k-th of the run's, the last one too): about two a pixel of a figure's width. More
+#: cost the redraw: Example 6.3.1's five figures at 2000 points in double precision took 12 ms longer from a slider's
+#: release to the redrawn figures (benchmarks/bench_explorer.py's drags, alternated between two servers)
+MAX_POINTS = 1000
 #: a list in metrics.json up to this long is a row of the table; a longer one (an n-DOF arm's φ̂) is left to the file
 MAX_LIST = 8
 
@@ -68,9 +70,17 @@ def thinned(n: int, limit: int = MAX_POINTS) -> np.ndarray:
     return np.unique(np.r_[np.arange(0, n, step), n - 1]) if n else np.arange(0)
 
 
+def single(values: np.ndarray) -> np.ndarray:
+    """`values` in single precision, as the browser draws them (seven digits, half the bytes to send): magnitudes
+    beyond single precision's range kept at its ends (not ±inf, nor 0 on a log axis); NaN stays NaN."""
+    info = np.finfo(np.float32)
+    magnitude = np.clip(np.abs(values), info.tiny, info.max)
+    return np.where(values == 0, 0.0, np.sign(values) * magnitude).astype(np.float32)
+
+
 def _curves(name: str, values: list[np.ndarray], keep: np.ndarray) -> dict[str, np.ndarray]:
-    """The columns `name0`, `name1`, … of `values`, at the samples `keep`."""
-    return {f"{name}{i}": np.asarray(v, dtype=float)[keep] for i, v in enumerate(values)}
+    """The columns `name0`, `name1`, … of `values`, at the samples `keep`, in single precision."""
+    return {f"{name}{i}": single(np.asarray(v, dtype=float)[keep]) for i, v in enumerate(values)}
 
 
 def _estimates(run: Run) -> tuple[Panel, list[np.ndarray]]:
