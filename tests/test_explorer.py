@@ -29,7 +29,7 @@ from robotadapt.explorer.curves import MAX_POINTS, curves, single, thinned  # no
 from robotadapt.explorer.download import FILES, archive  # noqa: E402
 from robotadapt.explorer.runner import Runner  # noqa: E402
 from robotadapt.explorer.server import allowed_hosts, local  # noqa: E402
-from robotadapt.explorer.view import View, refuse_code  # noqa: E402
+from robotadapt.explorer.view import FIGURES, View, refuse_code  # noqa: E402
 from robotadapt.studies.compare import number_text  # noqa: E402
 from robotadapt.studies.scenarios import load  # noqa: E402
 from robotadapt.validation import ConfigError  # noqa: E402
@@ -62,9 +62,11 @@ def run_metrics(tmp_path: Path, *sets: str) -> dict:
 
 
 def test_a_view_round_trips_through_its_url():
-    view = View("example-6.3.1", "pd", ("controller.Kv=20", "simulation.control_period=0.002"), large=True)
+    view = View("example-6.3.1", "pd", ("controller.Kv=20", "simulation.control_period=0.002"), large=True,
+                hidden=("abs_e", "V"))
     query = view.query()
-    assert query == "?scenario=example-6.3.1&law=pd&fonts=large&set=controller.Kv=20&set=simulation.control_period=0.002"
+    assert query == ("?scenario=example-6.3.1&law=pd&fonts=large&hide=abs_e,V&set=controller.Kv=20"
+                     "&set=simulation.control_period=0.002")
     arguments: dict[str, list[bytes]] = {}
     for part in query[1:].split("&"):
         key, _, value = part.partition("=")
@@ -183,7 +185,7 @@ def test_the_curves_are_the_runs_samples_thinned_in_single_precision(catalogue):
     res = catalogue.run(View("example-6.3.1")).result
     shown = curves(catalogue.run(View("example-6.3.1")))
     keep = thinned(res.t.size)
-    assert [p.name for p in shown.panels] == ["e", "abs_e", "phi", "tau", "V"]
+    assert [p.name for p in shown.panels] == list(FIGURES) == ["e", "abs_e", "phi", "tau", "V"]
     assert shown.data["t"].tolist() == res.t[keep].tolist()
     for column, values in (("e1", res.e[keep, 1]), ("abs_e0", np.abs(res.e[keep, 0])), ("tau1", res.tau[keep, 1]),
                            ("phi0", res.phi_hat[keep, 0]), ("V0", res.V[keep])):
@@ -462,6 +464,26 @@ def test_the_url_round_trips_and_pinning_keeps_a_run_beneath(chromium, served):
     assert rows(again) == rows(page)
     assert model(again, "law", "value") == "pd" and field(again, "simulation.t_final").input_value() == "5"
     again.close()
+    page.close()
+
+
+@needs_browser
+def test_hidden_figures_leave_the_page_and_the_url_keeps_them(chromium, served):
+    figures = ("Bokeh.documents[0].roots().filter(r => r.name && r.name.startsWith('slot'))"
+               ".flatMap(r => r.children).filter(c => c.type === 'Figure').length")
+    page = page_of(chromium, served, View("example-6.3.1", hidden=("abs_e",)))
+    assert page.evaluate(figures) == 4 and model(page, "figures", "active") == [0, 2, 3, 4]
+    page.locator(".bk-btn-group button", has_text="V").click()  # hide V as well
+    page.wait_for_function(f"{figures} === 3")
+    page.wait_for_function("window.location.search.includes('hide=abs_e,V')")  # (history.replaceState: not page.url)
+    before = bench.drawn(page)
+    field(page, "controller.Kv").fill("30")
+    field(page, "controller.Kv").press("Enter")
+    page.wait_for_function(f"window.robotadaptDrawn.run > {before}")
+    assert "hide=abs_e,V" in page.evaluate("window.location.search") and page.evaluate(figures) == 3
+    page.locator(".bk-btn-group button", has_text="|e| (log)").click()  # shown again, with the newest run's data
+    page.wait_for_function(f"{figures} === 4")
+    page.wait_for_function("window.location.search.includes('hide=V')")
     page.close()
 
 

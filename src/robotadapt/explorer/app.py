@@ -23,7 +23,17 @@ import numpy as np
 from bokeh.document import Document
 from bokeh.layouts import column, row
 from bokeh.models import ColumnDataSource, CustomJS, CustomJSTickFormatter
-from bokeh.models.widgets import Button, DataTable, Div, Select, Slider, TableColumn, TextInput, Toggle
+from bokeh.models.widgets import (
+    Button,
+    CheckboxButtonGroup,
+    DataTable,
+    Div,
+    Select,
+    Slider,
+    TableColumn,
+    TextInput,
+    Toggle,
+)
 from jinja2 import Template
 
 from ..studies.scenarios.loader import parse_value
@@ -32,7 +42,7 @@ from .catalogue import Catalogue, Control, Run, one_line
 from .curves import Curves, curves, metric_rows
 from .panels import Figures
 from .runner import Outcome, Runner
-from .view import View, key_of
+from .view import FIGURES, View, key_of
 
 log = logging.getLogger(__name__)
 
@@ -57,9 +67,9 @@ if (run !== window.robotadaptRun) {
 DOWNLOAD_JS = "window.location.assign('download' + window.location.search)"
 SLIDER_FORMAT = "return (10 ** tick).toPrecision(3)"
 ERROR_STYLE: dict[str, str | None] = {"color": "#b00020", "font-weight": "bold"}
-#: the five figures' and the metrics table's places, each a root of its own: a figure whose axes change lays out itself, not
-#: the page (Bokeh lays out a root and everything in it at once)
-SLOTS = 6
+#: the places of the figures shown, then of the metrics table, each a root of its own: a figure whose axes change lays out
+#: itself, not the page (Bokeh lays out a root and everything in it at once)
+SLOTS = len(FIGURES) + 1
 TEMPLATE = Template("""{% extends base %}
 {% block postamble %}<style>
   .ra-page { display: grid; grid-template-columns: max-content minmax(0, 1fr); gap: 16px; padding: 8px; }
@@ -193,11 +203,15 @@ class Page:
         reset.on_click(self._reset)
         self.large = Toggle(label="lecture fonts", active=self.view.large, width=170)
         self.large.on_change("active", self._fonts)
+        # the figures shown: a hidden one is out of the document, so the browser neither receives nor paints it
+        self.shown = CheckboxButtonGroup(labels=list(FIGURES.values()), width=WIDTH, name="figures",
+                                         active=[i for i, n in enumerate(FIGURES) if n not in self.view.hidden])
+        self.shown.on_change("active", self._shown)
         self.slots = [column(Div(text="the first run is on its way…" if i == 0 else ""), sizing_mode="stretch_width",
-                             name=f"slot{i}") for i in range(SLOTS - 1)]
-        self.slots.append(column(self.metrics, sizing_mode="stretch_width", name=f"slot{SLOTS - 1}"))
+                             name=f"slot{i}") for i in range(SLOTS)]
         self.roots = [column(Div(text="<b>robotadapt explorer</b>", styles={"font-size": "150%"}), self.scenario,
-                             self.law, self.skipped, self.gains, self.settings, self.others, row(pin, unpin),
+                             self.law, self.skipped, self.gains, self.settings, self.others,
+                             Div(text="<b>figures shown</b>"), self.shown, row(pin, unpin),
                              row(download, self.large), reset, self.message, width=WIDTH + 20, name="controls"),
                       column(self.source, self.status, sizing_mode="stretch_width", name="head"), *self.slots,
                       column(self.warnings, sizing_mode="stretch_width", name="tail")]
@@ -223,7 +237,7 @@ class Page:
 
     def _scenario(self, attr: str, old: Any, new: str) -> None:
         if new != self.view.scenario:
-            self.submit(View(new, large=self.view.large))
+            self.submit(View(new, large=self.view.large, hidden=self.view.hidden))
 
     def _law(self, attr: str, old: Any, new: str) -> None:
         law = None if new == self.reference else new
@@ -255,6 +269,11 @@ class Page:
         self.state.data = {"url": [self.view.query()], "run": self.state.data["run"]}
         self._style()
         self._draw()
+
+    def _shown(self, attr: str, old: Any, new: list[int]) -> None:
+        self.view = replace(self.view, hidden=tuple(n for i, n in enumerate(FIGURES) if i not in new))
+        self.state.data = {"url": [self.view.query()], "run": self.state.data["run"]}
+        self._place()
 
     def _pin(self) -> None:
         self.pinned = self.current
@@ -401,8 +420,16 @@ class Page:
         self.figures = Figures(self.current.curves, self.pinned.curves if self.pinned is not None else None,
                                self.view.large, height=330 if self.view.large else 260)
         self.metrics.height = self.figures.figures[0].height
-        for slot, fig in zip(self.slots, self.figures.figures, strict=False):  # the last slot holds the table
-            slot.children = [fig]
+        self._place()
+
+    def _place(self) -> None:
+        """The figures shown in the first slots, then the metrics table; the other slots empty."""
+        if self.figures is None:
+            return
+        shown = [f for f, panel in zip(self.figures.figures, self.figures.panels, strict=True)
+                 if panel.name not in self.view.hidden]
+        for i, slot in enumerate(self.slots):
+            slot.children = [[*shown, self.metrics][i]] if i <= len(shown) else []
 
     def _table(self) -> None:
         rows = self.current.rows if self.current is not None else {}

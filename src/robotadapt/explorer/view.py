@@ -1,6 +1,7 @@
 """What the explorer shows, as its URL says it: a scenario, a law of its lineup and `--set` assignments
-(`?scenario=example-6.3.1&law=pd&set=controller.Kv=20&set=simulation.control_period=0.002`), so that a link
-reproduces a view. A URL never names code: an assignment that names a user kind (`"module:Class"`) is refused."""
+(`?scenario=example-6.3.1&law=pd&set=controller.Kv=20&set=simulation.control_period=0.002`), the figures hidden
+(`hide=abs_e,V`) and the lecture fonts, so that a link reproduces a view. A URL never names code: an assignment that
+names a user kind (`"module:Class"`) is refused."""
 
 from __future__ import annotations
 
@@ -11,6 +12,9 @@ from urllib.parse import quote
 
 from ..studies.scenarios.loader import parse_value
 from ..validation import ConfigError
+
+#: the page's figures by name, in their order, with the label of the button that shows or hides each
+FIGURES = {"e": "e", "abs_e": "|e| (log)", "phi": "φ̂", "tau": "τ", "V": "V"}
 
 #: characters left as they are in the URL's values: `set=controller.Kv=20`, `set=controller.Kv=[5,50]` stay readable
 SAFE = "=.,[]_-"
@@ -42,12 +46,14 @@ def refuse_code(assignment: str) -> None:
 @dataclass(frozen=True)
 class View:
     """A scenario (a packaged name, or the command line's file by its name), a lineup entry's name (`law`; None: the
-    scenario's own controller), the assignments in order (one per key) and whether the fonts are a lecture hall's."""
+    scenario's own controller), the assignments in order (one per key), whether the fonts are a lecture hall's and the
+    names of the figures hidden (:data:`~robotadapt.explorer.curves.FIGURES`' names)."""
 
     scenario: str
     law: str | None = None
     sets: tuple[str, ...] = ()
     large: bool = False
+    hidden: tuple[str, ...] = ()
 
     @classmethod
     def of_query(cls, arguments: Mapping[str, Sequence[bytes]], default: str) -> View:
@@ -57,8 +63,9 @@ class View:
             return [v.decode("utf-8", "replace") for v in arguments.get(name, ())]
 
         sets = {key_of(a): a.strip() for a in text("set")}  # one per key, the last given (as --set applies them)
+        hidden = {name for value in text("hide") for name in value.split(",")}
         return cls(next(iter(text("scenario")), default) or default, next(iter(text("law")), None) or None,
-                   tuple(sets.values()), text("fonts")[-1:] == ["large"])
+                   tuple(sets.values()), text("fonts")[-1:] == ["large"], tuple(n for n in FIGURES if n in hidden))
 
     def checked(self) -> tuple[View, list[ConfigError]]:
         """This view less the assignments that name a user kind, and what :func:`refuse_code` says of each."""
@@ -73,12 +80,14 @@ class View:
         return replace(self, sets=tuple(kept)), refused
 
     def query(self) -> str:
-        """The URL's query, `?scenario=…[&law=…][&fonts=large][&set=…]…`."""
+        """The URL's query, `?scenario=…[&law=…][&fonts=large][&hide=…][&set=…]…`."""
         parts = [f"scenario={quote(self.scenario, safe=SAFE)}"]
         if self.law is not None:
             parts.append(f"law={quote(self.law, safe=SAFE)}")
         if self.large:
             parts.append("fonts=large")
+        if self.hidden:
+            parts.append("hide=" + ",".join(self.hidden))
         parts += [f"set={quote(s, safe=SAFE)}" for s in self.sets]
         return "?" + "&".join(parts)
 
