@@ -203,7 +203,7 @@ class Page:
         reset.on_click(self._reset)
         self.large = Toggle(label="lecture fonts", active=self.view.large, width=170)
         self.large.on_change("active", self._fonts)
-        # the figures shown: a hidden one is out of the document, so the browser neither receives nor paints it
+        # the figures shown: a hidden one is out of the document, so the browser does not paint it (its curves still come)
         self.shown = CheckboxButtonGroup(labels=list(FIGURES.values()), width=WIDTH, name="figures",
                                          active=[i for i, n in enumerate(FIGURES) if n not in self.view.hidden])
         self.shown.on_change("active", self._shown)
