@@ -88,28 +88,6 @@ def test_loops_of_one_shape_share_a_program_and_keep_their_own_gains():
     assert runs[1][1] == runs[0][1]
 
 
-def test_released_programs_are_dropped_and_made_again_with_the_same_answer():
-    """`release` (the fair comparison's, between laws) empties the process's programs and JAX's caches; the next run
-    compiles again and equals the run before."""
-    import jax
-
-    from robotadapt.tracing import PROGRAMS, release
-
-    def run() -> np.ndarray:
-        ctrl = InertiaRelated(ARM, 2.5, 7.0, 20.0, [0.0, 0.0])
-        return simulate_batch([Plant(ARM, PHI)], [ctrl], sinusoid(2), t_final=0.3, integrator=RK4(1e-3, "jax")).run(0).x
-
-    before = run()
-    assert len(PROGRAMS) > 0
-    jitted = jax.jit(lambda x: x + 1)
-    jitted(1.0)
-    assert jitted._cache_size() == 1
-    release()
-    assert len(PROGRAMS) == 0 and jitted._cache_size() == 0
-    np.testing.assert_array_equal(run(), before)
-    assert len(PROGRAMS) > 0
-
-
 @pytest.mark.parametrize(("overrides", "message"), [
     (["simulation.backend='cuda'"], r"^simulation\.backend: expected one of (auto, )?numpy, jax(, c)?; got 'cuda'"),
     (["simulation.backend='jax'", "simulation.method='RK45'"], r"^simulation\.method: a controller with a delay line"),

@@ -11,7 +11,6 @@ again; the cache directory is set only where the user has set none (JAX has one 
 from __future__ import annotations
 
 import os
-import sys
 from collections.abc import Callable
 from functools import cache, wraps
 from pathlib import Path
@@ -68,15 +67,6 @@ class Programs:
 
 
 PROGRAMS = Programs(32)
-
-
-def release() -> None:
-    """Drop this process's compiled programs, the package's (:data:`PROGRAMS`) and JAX's in-memory caches: a study that
-    moves on to programs of another shape (the fair comparison's next law) then holds one set at a time. The disk
-    caches stay."""
-    PROGRAMS.items.clear()
-    if "jax" in sys.modules:
-        jax_module().clear_caches()
 
 
 def is_call(eqn: Any) -> bool:

@@ -52,7 +52,6 @@ from ..robots.base import RobotModel
 from ..robots.two_link import TwoLinkArm
 from ..sim.integrators import Sampled, SolveIVP
 from ..sim.result import SimulationResult
-from ..tracing import release
 from ..validation import ConfigError, as_gain
 from .scenarios import Scenario
 from .scenarios.build import NESTED, canonical_kind, constructor, keys, setup
@@ -500,7 +499,6 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
         row.metrics["within_budget"] = row.result.ok and row.metrics["peak_torque"] <= max_torque
         row.metrics["objective"] = goal.of_metrics(metrics(row.result))
         rows.append(row)
-        release()  # this law's programs serve no other: the peak memory is one law's, not the lineup's
         if progress:
             print(f"{entry.name}: {row.result.status}, RMS ‖e‖ {row.metrics['rms_error_norm']:.4g}, peak |τ| "
                   f"{row.metrics['peak_torque']:.4g}, " + (f"{row.metrics['tune_differentiated_runs']} differentiated "
