@@ -10,8 +10,9 @@ goals (p50 ≤ 150 ms for Example 6.3.1, 10 s at 1 kHz, its five figures shown; 
 on the two cores show up in every number).
 
 The page marks each outcome it shows in `window.robotadaptDrawn` (`{run, t}`): the run's figures redrawn, or its
-refusal shown. `--screenshot PATH` writes the docs' picture instead (docs/img/explorer.png): Example 6.3.1 at the
-book's gains pinned, then K_v = 40.
+refusal shown. `--against SRC` alternates Example 6.3.1's drags with the explorer of another source tree (the effect
+of a change, measured under one load). `--screenshot PATH` writes the docs' picture instead (docs/img/explorer.png):
+Example 6.3.1 at the book's gains pinned, then K_v = 40.
 """
 
 from __future__ import annotations
@@ -76,12 +77,15 @@ class Served:
         return self.process.wait(timeout)
 
 
-def serve(scenario: str = "example-6.3.1", *args: str, timeout: float = 60.0) -> Served:
-    """Start `robotadapt explore SCENARIO --port 0 --no-browser ARGS` and wait for its first page."""
+def serve(scenario: str = "example-6.3.1", *args: str, timeout: float = 60.0, source: Path | None = None) -> Served:
+    """Start `robotadapt explore SCENARIO --port 0 --no-browser ARGS` and wait for its first page; `source`: the
+    package from that source tree (its `src`, first on PYTHONPATH) instead of the installed one."""
     log = Path(tempfile.mkstemp(prefix="robotadapt-explore-", suffix=".log")[1])
     started = time.perf_counter()
-    process = subprocess.Popen([ROBOTADAPT, "explore", scenario, "--port", "0", "--no-browser", *args],
-                               stdout=subprocess.PIPE, stderr=log.open("w"), text=True)
+    command = [ROBOTADAPT] if source is None else [sys.executable, "-m", "robotadapt"]
+    env = None if source is None else {**os.environ, "PYTHONPATH": str(source)}
+    process = subprocess.Popen([*command, "explore", scenario, "--port", "0", "--no-browser", *args],
+                               stdout=subprocess.PIPE, stderr=log.open("w"), text=True, env=env)
     assert process.stdout is not None
     line = process.stdout.readline()
     found = re.search(r"(http://\S+?:(\d+)/)", line)
@@ -158,6 +162,36 @@ def latencies(page: Any, key: str, count: int) -> np.ndarray:
     return np.array(out)
 
 
+def paired(source: Path, count: int = 30) -> None:
+    """Example 6.3.1's drags alternated between this package's explorer and the one of the source tree `source` (a
+    `src` directory, e.g. of `git worktree add /tmp/before HEAD~1`), each in a page of its own: the p50 of each, as
+    a markdown table. Both share the machine's load, drag for drag: a change's effect shows where two separate runs
+    of the benchmark differ by more than it."""
+    from playwright.sync_api import sync_playwright
+
+    servers = {"this package": serve(), str(source): serve(source=source)}
+    try:
+        with sync_playwright() as p:
+            chromium = browser(p)
+            pages = {name: open_page(chromium, s.page(View("example-6.3.1"))) for name, s in servers.items()}
+            for page in pages.values():
+                drag(page, "controller.Kv", 0.1)
+            ms: dict[str, list[float]] = {name: [] for name in pages}
+            for k in range(count):
+                for name, page in pages.items():
+                    page.bring_to_front()
+                    time.sleep(PAUSE)
+                    ms[name].append(drag(page, "controller.Kv", 0.12 + 0.8 * (k + 1) / count))
+            chromium.close()
+    finally:
+        for s in servers.values():
+            s.stop()
+    print("| explorer | drags | p50 (ms) | mean (ms) |")
+    print("|---|---|---|---|")
+    for name, values in ms.items():
+        print(f"| {name} | {count} | {np.median(values):.0f} | {np.mean(values):.0f} |")
+
+
 def screenshot(path: Path) -> None:
     """The docs' picture: Example 6.3.1 at the book's gains pinned beneath K_v = 40."""
     from playwright.sync_api import sync_playwright
@@ -183,6 +217,8 @@ def screenshot(path: Path) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--screenshot", type=Path, metavar="PATH", help="write the docs' picture and exit")
+    parser.add_argument("--against", type=Path, metavar="SRC",
+                        help="alternate Example 6.3.1's drags with the explorer of another source tree's src directory")
     args = parser.parse_args()
     why = missing()
     if why:
@@ -191,6 +227,12 @@ def main() -> int:
     if args.screenshot:
         screenshot(args.screenshot)
         print(f"wrote {args.screenshot}")
+        return 0
+    if args.against:
+        if not (args.against / "robotadapt" / "__init__.py").is_file():
+            print(f"--against: {args.against} holds no robotadapt package; give a source tree's src directory")
+            return 2
+        paired(args.against)
         return 0
     from playwright.sync_api import sync_playwright
 

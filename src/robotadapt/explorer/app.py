@@ -306,7 +306,8 @@ class Page:
         self.doc.hold("combine")
         try:
             shown = self._outcome(outcome)
-            self.unsent = None if shown is None else (shown, outcome)
+            if shown is not None:
+                self.unsent = (shown, outcome)
             self.state.data = {"url": self.state.data["url"], "run": [outcome.ticket]}
         finally:
             self.doc.unhold()
@@ -318,15 +319,18 @@ class Page:
             self._texts(shown, outcome)
 
     def _outcome(self, outcome: Outcome) -> Shown | None:
-        """The run's figures, or its refusal (None)."""
+        """The run's figures, or its refusal (None: the figures keep the run drawn last, whose texts are put up first
+        if the browser has not yet said it painted it)."""
         shown: Shown | None = outcome.value
-        if shown is None:
-            self._error(outcome.error, outcome.ticket)
+        if shown is None or shown.error is not None or shown.run is None:
+            if self.unsent is not None:
+                self._texts(*self.unsent)
+                self.unsent = None
+            if shown is not None:
+                self._controls(shown)
+            self._error(shown.error if shown is not None else outcome.error, outcome.ticket)
             return None
         self._controls(shown)
-        if shown.error is not None or shown.run is None:
-            self._error(shown.error, outcome.ticket)
-            return None
         self.current = shown
         if self.figures is not None and shown.curves is not None and self.figures.fits(shown.curves):
             self.figures.update(shown.curves)
