@@ -47,7 +47,7 @@ def refuse_code(assignment: str) -> None:
 class View:
     """A scenario (a packaged name, or the command line's file by its name), a lineup entry's name (`law`; None: the
     scenario's own controller), the assignments in order (one per key), whether the fonts are a lecture hall's and the
-    names of the figures hidden (:data:`~robotadapt.explorer.curves.FIGURES`' names)."""
+    names of the figures hidden (:data:`FIGURES`' names)."""
 
     scenario: str
     law: str | None = None
