@@ -27,6 +27,7 @@ from robotadapt.cli import main  # noqa: E402
 from robotadapt.explorer.catalogue import Catalogue  # noqa: E402
 from robotadapt.explorer.curves import MAX_POINTS, curves, single, thinned  # noqa: E402
 from robotadapt.explorer.download import FILES, archive  # noqa: E402
+from robotadapt.explorer.panels import PADDING, y_bounds  # noqa: E402
 from robotadapt.explorer.runner import Runner  # noqa: E402
 from robotadapt.explorer.server import allowed_hosts, local  # noqa: E402
 from robotadapt.explorer.view import FIGURES, View, refuse_code  # noqa: E402
@@ -196,6 +197,15 @@ def test_the_curves_are_the_runs_samples_thinned_in_single_precision(catalogue):
     assert single(big).tolist()[:5] == [0.0, np.finfo(np.float32).tiny, -np.finfo(np.float32).tiny,
                                         np.finfo(np.float32).max, -np.finfo(np.float32).max]
     assert np.isnan(single(big)[5]) and single(big)[6] == -2.25
+
+
+def test_the_y_axes_fit_the_finite_values_with_padding():
+    low, high = y_bounds([np.array([1.0, np.nan, 3.0]), np.array([-1.0, np.inf])], log=False)
+    assert (low, high) == pytest.approx((-1.0 - 4 * PADDING, 3.0 + 4 * PADDING))
+    low, high = y_bounds([np.array([0.0, 1e-6, 1e-2, -5.0])], log=True)  # decades of the positive values
+    assert (np.log10(low), np.log10(high)) == pytest.approx((-6 - 4 * PADDING, -2 + 4 * PADDING))
+    assert y_bounds([np.array([2.0, 2.0])], log=False) == pytest.approx((2 - 2 * PADDING, 2 + 2 * PADDING))
+    assert y_bounds([np.array([np.nan])], log=False) == (-1.0, 1.0) and y_bounds([], log=True) == (0.1, 10.0)
 
 
 def test_only_packaged_scenarios_and_the_command_lines_file(catalogue, tmp_path):
@@ -484,6 +494,27 @@ def test_hidden_figures_leave_the_page_and_the_url_keeps_them(chromium, served):
     page.locator(".bk-btn-group button", has_text="|e| (log)").click()  # shown again, with the newest run's data
     page.wait_for_function(f"{figures} === 4")
     page.wait_for_function("window.location.search.includes('hide=V')")
+    page.close()
+
+
+@needs_browser
+def test_the_y_axes_hold_as_the_gains_move_until_fitted_again(chromium, served):
+    axis = "Bokeh.documents[0].get_model_by_name('figure-e').y_range"
+    y_range = f"[{axis}.start, {axis}.end]"
+    page = page_of(chromium, served, View("example-6.3.1"))
+    data = "['e0', 'e1'].flatMap(c => Array.from(Bokeh.documents[0].get_model_by_name('curves').data[c]))"
+    held = page.evaluate(y_range)
+    e = np.array(page.evaluate(data), dtype=float)
+    assert held[0] <= np.nanmin(e) and np.nanmax(e) <= held[1]  # fitted to the first run
+    bench.drag(page, "controller.Kv", 0.95)  # a much larger K_v: a much smaller error
+    bench.settled(page)
+    assert page.evaluate(y_range) == held
+    e = np.array(page.evaluate(data), dtype=float)
+    page.get_by_role("button", name="fit axes").click()
+    page.wait_for_function(f"{axis}.end !== {held[1]}")
+    fitted = page.evaluate(y_range)
+    span = np.nanmax(e) - np.nanmin(e)
+    assert fitted == pytest.approx([np.nanmin(e) - PADDING * span, np.nanmax(e) + PADDING * span], rel=1e-6)
     page.close()
 
 

@@ -201,6 +201,8 @@ class Page:
         download.js_on_click(CustomJS(code=DOWNLOAD_JS))
         reset = Button(label="the lineup's gains", width=170)
         reset.on_click(self._reset)
+        fit = Button(label="fit axes", width=170, name="fit")
+        fit.on_click(self._fit)
         self.large = Toggle(label="lecture fonts", active=self.view.large, width=170)
         self.large.on_change("active", self._fonts)
         # the figures shown: a hidden one is out of the document, so the browser does not paint it (its curves still come)
@@ -212,7 +214,7 @@ class Page:
         self.roots = [column(Div(text="<b>robotadapt explorer</b>", styles={"font-size": "150%"}), self.scenario,
                              self.law, self.skipped, self.gains, self.settings, self.others,
                              Div(text="<b>figures shown</b>"), self.shown, row(pin, unpin),
-                             row(download, self.large), reset, self.message, width=WIDTH + 20, name="controls"),
+                             row(download, self.large), row(reset, fit), self.message, width=WIDTH + 20, name="controls"),
                       column(self.source, self.status, sizing_mode="stretch_width", name="head"), *self.slots,
                       column(self.warnings, sizing_mode="stretch_width", name="tail")]
         self._style()
@@ -274,6 +276,10 @@ class Page:
         self.view = replace(self.view, hidden=tuple(n for i, n in enumerate(FIGURES) if i not in new))
         self.state.data = {"url": [self.view.query()], "run": self.state.data["run"]}
         self._place()
+
+    def _fit(self) -> None:
+        if self.figures is not None and self.current is not None and self.current.curves is not None:
+            self.figures.fit(self.current.curves)
 
     def _pin(self) -> None:
         self.pinned = self.current

@@ -1,16 +1,25 @@
 """The page's figures, drawn by Bokeh from :mod:`.curves`' panels: one figure per panel, time axes linked (zoom one,
-all follow), a hover readout, legends that hide a curve on a click, and a pinned run drawn faintly beneath."""
+all follow), a hover readout, legends that hide a curve on a click, and a pinned run drawn faintly beneath.
+
+The y axes are held: fitted to the curves when the figures are made (a view's first run, a new law, a pin) and kept as
+the gains move, so that a smaller error looks smaller; :meth:`Figures.fit` fits them again (the page's "fit axes").
+Held axes also redraw sooner: a range that a new run changes makes Bokeh measure and lay out every axis again."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
+import numpy as np
 from bokeh.models import ColumnDataSource, HoverTool, Range1d
 from bokeh.models.annotations import Span, Title
 from bokeh.palettes import Category10_10
 from bokeh.plotting import figure
 
-from .curves import Curves
+from .curves import Curves, Panel
+
+#: the share of the curves' span left free above and below (of their decades on a log axis), as Bokeh's own ranges
+PADDING = 0.05
 
 #: (title, axis labels, tick labels, legend) font sizes: a lecture hall's, and the screen's
 FONTS = {True: ("22px", "20px", "17px", "17px"), False: ("14px", "13px", "11px", "11px")}
@@ -21,6 +30,27 @@ def end(curves: Curves) -> float:
     """The last instant of the curves (1 s for none)."""
     t = curves.data.get("t")
     return float(t[-1]) if t is not None and len(t) else 1.0
+
+
+def y_bounds(values: Iterable[np.ndarray], log: bool) -> tuple[float, float]:
+    """A y range showing the finite values (positive ones on a `log` axis) of `values`, `PADDING` to spare."""
+    kept = [v[np.isfinite(v) & (v > 0 if log else True)] for v in map(np.asarray, values)]
+    kept = [v for v in kept if v.size]
+    if not kept:
+        return (0.1, 10.0) if log else (-1.0, 1.0)
+    low, high = min(float(v.min()) for v in kept), max(float(v.max()) for v in kept)
+    if log:
+        low, high = np.log10(low), np.log10(high)
+    span = high - low if high > low else 1.0 if log else max(abs(high), 1.0)
+    low, high = low - PADDING * span, high + PADDING * span
+    return (10.0 ** low, 10.0 ** high) if log else (low, high)
+
+
+def _columns(panel: Panel | None, curves: Curves | None) -> list[np.ndarray]:
+    """The data of `panel`'s curves in `curves` (none without either)."""
+    if panel is None or curves is None:
+        return []
+    return [curves.data[s.column] for s in panel.series]
 
 
 def color(i: int) -> str:
@@ -37,16 +67,21 @@ class Figures:
         self.figures: list[Any] = []
         before = {p.name: p for p in pinned.panels} if pinned is not None else {}
         faint = ColumnDataSource(pinned.data if pinned is not None else {})
+        self.pinned = pinned
+        #: the pinned run's panel drawn beneath each panel (None: none)
+        self.beneath = [old if old is not None and old.log == p.log else None
+                        for p, old in ((p, before.get(p.name)) for p in curves.panels)]
+        self.y_ranges = [Range1d() for _ in curves.panels]
         # one time axis, set (not computed from the data): zoom one figure, all follow
         self.x_range = Range1d(start=0.0, end=end(curves), reset_start=0.0, reset_end=end(curves))
         title, axis, ticks, legend = FONTS[large]
-        for panel in curves.panels:
+        for panel, old, y_range in zip(curves.panels, self.beneath, self.y_ranges, strict=True):
             fig = figure(title=Title(text=panel.title, text_font_size=title), x_axis_label="time t (s)",
                          y_axis_type="log" if panel.log else "linear",
                          y_axis_label=panel.ylabel, tools=TOOLS, active_scroll="wheel_zoom", height=height,
-                         sizing_mode="stretch_width", name=f"figure-{panel.name}", x_range=self.x_range)
-            old = before.get(panel.name)
-            if old is not None and old.log == panel.log:
+                         sizing_mode="stretch_width", name=f"figure-{panel.name}", x_range=self.x_range,
+                         y_range=y_range)
+            if old is not None:
                 for s in old.series:
                     fig.line("t", s.column, source=faint, color=color(s.color), alpha=0.3, line_width=3,
                              line_dash="dashed" if s.truth else "solid", legend_label="pinned run")
@@ -64,12 +99,20 @@ class Figures:
                                   label_text_font_size=legend, visible=panel.legend)
             self.figures.append(fig)
 
+        self.fit(curves)
+
+    def fit(self, curves: Curves) -> None:
+        """Each y axis (and its reset) fitted to `curves` and the pinned run's curves beneath."""
+        for panel, old, y_range in zip(curves.panels, self.beneath, self.y_ranges, strict=True):
+            low, high = y_bounds(_columns(panel, curves) + _columns(old, self.pinned), panel.log)
+            y_range.update(start=low, end=high, reset_start=low, reset_end=high)
+
     def fits(self, curves: Curves) -> bool:
         """Whether these figures draw `curves` (the same panels)."""
         return self.panels == curves.panels
 
     def update(self, curves: Curves) -> None:
-        """New data for curves that fit (the time axis reset when the run's length changed)."""
+        """New data for curves that fit, the y axes held (the time axis reset when the run's length changed)."""
         if self.x_range.reset_end != end(curves):
             self.x_range.update(start=0.0, end=end(curves), reset_start=0.0, reset_end=end(curves))
         self.source.data = curves.data
