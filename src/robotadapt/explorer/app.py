@@ -436,10 +436,10 @@ class Page:
         """The figures shown in the first slots, then the metrics table; the other slots empty."""
         if self.figures is None:
             return
-        shown = [f for f, panel in zip(self.figures.figures, self.figures.panels, strict=True)
-                 if panel.name not in self.view.hidden]
+        items = [f for f, panel in zip(self.figures.figures, self.figures.panels, strict=True)
+                 if panel.name not in self.view.hidden] + [self.metrics]
         for i, slot in enumerate(self.slots):
-            slot.children = [[*shown, self.metrics][i]] if i <= len(shown) else []
+            slot.children = [items[i]] if i < len(items) else []
 
     def _table(self) -> None:
         rows = self.current.rows if self.current is not None else {}
