@@ -406,6 +406,40 @@ def test_the_url_shows_what_robotadapt_run_writes_to_its_printed_digits(chromium
     page.close()
 
 
+#: Bokeh's own paint put back on a page, and the reads of the visuals' CSS variables counted
+BOKEH_PAINT = """() => {
+  const own = window.robotadaptPaint, read = CSSStyleDeclaration.prototype.getPropertyValue;
+  own.visual._get_css_value = own.css;
+  own.sheet._update = own.update;
+  window.cssReads = 0;
+  CSSStyleDeclaration.prototype.getPropertyValue = function (name) {
+    if (name.startsWith("--bk-")) { window.cssReads++; }
+    return read.call(this, name);
+  };
+}"""
+
+
+@needs_browser
+def test_the_faster_paint_draws_what_bokeh_draws(chromium, served):
+    """The page's changes to BokehJS's paint (PAINT_JS) are in effect, and the figures they paint are Bokeh's own to
+    the pixel: two pages of one view, made narrower and back (which repaints every figure), one with Bokeh's own
+    functions put back (which read the visuals' CSS variables), show the same figures."""
+    shots, reads = [], []
+    for own in (False, True):
+        page = page_of(chromium, served, View("example-6.3.1", sets=("controller.Kv=20",)))
+        assert page.evaluate("window.robotadaptPaint.visual._get_css_value('line-color')") == ""
+        if own:
+            page.evaluate(BOKEH_PAINT)
+        for size in ({"width": bench.VIEWPORT["width"] - 200, "height": bench.VIEWPORT["height"]}, bench.VIEWPORT):
+            page.set_viewport_size(size)
+            page.wait_for_timeout(500)
+        reads.append(page.evaluate("window.cssReads"))
+        shots.append(page.locator(".ra-grid").screenshot())
+        page.close()
+    assert reads[0] is None and reads[1] > 0
+    assert shots[0] == shots[1]
+
+
 @needs_browser
 def test_a_slider_redraws_the_figures_and_the_metrics_as_robotadapt_run_would(chromium, served, tmp_path):
     page = page_of(chromium, served, View("example-6.3.1"))

@@ -11,6 +11,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -63,16 +64,23 @@ SETTINGS = (("simulation.t_final", "final time t_final", "s"),
 
 @dataclass(frozen=True, eq=False)
 class Run:
-    """A view's run: its scenario, result, metrics (metrics.json's), the health warnings and the controller's model."""
+    """A view's run: its scenario, result and the controller's model; its metrics (metrics.json's) and health warnings
+    computed when first asked for (the page asks after the figures are painted: 4 ms of Example 6.3.1's run)."""
 
     scenario: Scenario
     result: SimulationResult
-    metrics: dict[str, Any]
-    warnings: list[str]
 
     @property
     def model(self) -> Any:
         return self.scenario.setup.controller.model
+
+    @cached_property
+    def metrics(self) -> dict[str, Any]:
+        return metrics(self.result, self.model)
+
+    @cached_property
+    def warnings(self) -> list[str]:
+        return health_warnings(self.metrics)
 
 
 class _Recent:
@@ -210,8 +218,6 @@ class Catalogue:
 
         def make() -> Run:
             scenario = self.scenario(view)
-            result = scenario.run()
-            m = metrics(result, scenario.setup.controller.model)
-            return Run(scenario, result, m, health_warnings(m))
+            return Run(scenario, scenario.run())
 
         return self._runs.get((view.scenario, view.law, view.sets), make)

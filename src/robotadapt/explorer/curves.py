@@ -78,28 +78,31 @@ def single(values: np.ndarray) -> np.ndarray:
     return np.where(values == 0, 0.0, np.sign(values) * magnitude).astype(np.float32)
 
 
-def _curves(name: str, values: list[np.ndarray], keep: np.ndarray) -> dict[str, np.ndarray]:
-    """The columns `name0`, `name1`, … of `values`, at the samples `keep`, in single precision."""
-    return {f"{name}{i}": single(np.asarray(v, dtype=float)[keep]) for i, v in enumerate(values)}
+def _curves(name: str, values: list[np.ndarray]) -> dict[str, np.ndarray]:
+    """The columns `name0`, `name1`, … of `values`, in single precision."""
+    return {f"{name}{i}": single(np.asarray(v, dtype=float)) for i, v in enumerate(values)}
 
 
-def _estimates(run: Run) -> tuple[Panel, list[np.ndarray]]:
-    """φ̂_i with the true φ_i dashed; the relative error ‖φ − φ̂‖/‖φ‖ (‖φ̂‖ without the truth) for many parameters."""
+def _estimates(run: Run, keep: np.ndarray) -> tuple[Panel, list[np.ndarray]]:
+    """φ̂_i with the true φ_i dashed; the relative error ‖φ − φ̂‖/‖φ‖ (‖φ̂‖ without the truth) for many parameters; at
+    the samples `keep`."""
     res = run.result
-    names, truth = res.param_names, res.phi_true
+    names = res.param_names
     if not names:
         return Panel("phi", "this law estimates no parameters", "", False, ()), []
+    phi_hat, truth = res.phi_hat[keep], res.phi_true
+    truth = None if truth is None else truth[keep]
     if len(names) > MAX_PARAMETER_LINES:
         if truth is None:
             return Panel("phi", f"‖φ̂‖ of {len(names)} parameters", "‖φ̂‖ (mixed units)", False,
-                         (Series("phi0", "‖φ̂‖", 0),)), [np.linalg.norm(res.phi_hat, axis=-1)]
-        rel = np.linalg.norm(truth - res.phi_hat, axis=-1) / np.maximum(np.linalg.norm(truth, axis=-1), 1e-300)
+                         (Series("phi0", "‖φ̂‖", 0),)), [np.linalg.norm(phi_hat, axis=-1)]
+        rel = np.linalg.norm(truth - phi_hat, axis=-1) / np.maximum(np.linalg.norm(truth, axis=-1), 1e-300)
         return Panel("phi", f"parameter error, {len(names)} parameters", "‖φ − φ̂‖ / ‖φ‖", True,
                      (Series("phi0", "‖φ − φ̂‖ / ‖φ‖", 0),)), [positive(rel)]
     units = parameter_units(run.model, names)
     series = [Series(f"phi{i}", f"{name}" + (f" ({unit})" if unit else ""), i) for i, (name, unit) in
               enumerate(zip(names, units, strict=True))]
-    values = list(res.phi_hat.T)
+    values = list(phi_hat.T)
     if truth is not None:
         series += [Series(f"phi{len(names) + i}", f"{name} true", i, truth=True) for i, name in enumerate(names)]
         values += list(truth.T)
@@ -112,7 +115,8 @@ def curves(run: Run) -> Curves:
     res = run.result
     keep = thinned(res.t.size)
     task = res.space == "task"
-    n = res.e.shape[-1]
+    e = res.e[keep]
+    n = e.shape[-1]
     joints = "P" * n if task else joint_types(run.model)
     unit = norm_unit(POSITION, joints)
     names = [f"e_{'xyz'[i]}" if task else f"e_{i + 1}" for i in range(n)]
@@ -123,7 +127,7 @@ def curves(run: Run) -> Curves:
         (sign * float(v), i) for i, v in enumerate(np.broadcast_to(np.asarray(limit, dtype=float), (tau_n,)))
         for sign in (1.0, -1.0))
     kinds = set(joints or "?")
-    estimates, phi = _estimates(run)
+    estimates, phi = _estimates(run, keep)
     panels = [
         Panel("e", "hand error e = x_d − x" if task else "tracking error e = q_d − q", f"e ({unit})", False,
               tuple(Series(f"e{i}", name, i) for i, name in enumerate(names))),
@@ -136,9 +140,9 @@ def curves(run: Run) -> Curves:
         Panel("V", "this law has no Lyapunov function V", "", False, ()) if res.V is None else
         Panel("V", "Lyapunov function V, log scale", "V", True, (Series("V0", "V", 0),), legend=False),
     ]
-    data = {"t": res.t[keep], **_curves("e", list(res.e.T), keep),
-            **_curves("abs_e", [positive(np.abs(c)) for c in res.e.T], keep), **_curves("phi", phi, keep),
-            **_curves("tau", list(res.tau.T), keep), **_curves("V", [] if res.V is None else [positive(res.V)], keep)}
+    data = {"t": res.t[keep], **_curves("e", list(e.T)), **_curves("abs_e", [positive(np.abs(c)) for c in e.T]),
+            **_curves("phi", phi), **_curves("tau", list(res.tau[keep].T)),
+            **_curves("V", [] if res.V is None else [positive(res.V[keep])])}
     return Curves(panels, data)
 
 
