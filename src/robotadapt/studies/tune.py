@@ -153,8 +153,7 @@ class Problem:
             loop = pytree.replace(loop, gain.path, g)
             if gain.x0_jacobian is not None:
                 x0 = x0 + gain.x0_jacobian @ (jnp.reshape(g, (-1,)) - np.reshape(gain.initial, (-1,)))
-        t, e, tau, z = self.rollout.signals(loop, self.trajectory, jnp.concatenate([jnp.asarray(self.s0), x0]))
-        ok = jnp.all(jnp.isfinite(z)) & (jnp.max(jnp.abs(z)) <= self.max_state)
+        t, e, tau, ok = self.rollout.scores(loop, jnp.concatenate([jnp.asarray(self.s0), x0]), self.max_state)
         values = objective_terms(t, e, tau)
         return values, jnp.abs(tau) / (self.max_torque or 1.0), ok
 
