@@ -58,6 +58,29 @@ def test_the_differentiable_run_is_the_compiled_forward_run(name):
     np.testing.assert_allclose(np.asarray(tau), reference.tau, rtol=1e-9, atol=1e-9)
 
 
+
+@pytest.mark.parametrize("sets", [[], ["simulation.control_period=0.004", "plant.noise_q=1e-4"]],
+                         ids=["rk4", "sampled"])
+def test_the_scores_are_the_signals_without_the_states(sets):
+    """What tuning scores (`Rollout.scores`, no state logged) is what `signals` logs: e and τ to round-off, and `ok`
+    the states' check written out here — finite and within the bound, over every logged state."""
+    scenario = load("example-6.6.3", SHORT + sets)  # the composite law: P is in the state
+    s = scenario.setup
+    ctrl = s.controller.prepare(s.trajectory, s.integrator.dt, s.t_final)
+    loop = ClosedLoop(s.plant, ctrl, s.plant.model.n)
+    z0 = np.concatenate([s.plant.initial_state(s.q0, s.dq0), ctrl.initial_state(s.q0, s.dq0)])
+    rollout = Rollout.make(loop, s.trajectory, s.integrator, s.t_final, 1)
+    t, e, tau, z = (np.asarray(a) for a in rollout.signals(loop, s.trajectory, z0))
+    peak = np.max(np.abs(z))
+    for bound in (2 * peak, 0.5 * peak):
+        t2, e2, tau2, ok = rollout.scores(loop, z0, bound)
+        np.testing.assert_array_equal(np.asarray(t2), t)
+        np.testing.assert_allclose(np.asarray(e2), e, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(tau2), tau, rtol=1e-12, atol=1e-12)
+        assert bool(ok) == bool(np.all(np.isfinite(z)) and peak <= bound)
+    z0[0] = np.nan
+    assert not bool(rollout.scores(loop, z0, 2 * peak)[3])
+
 @pytest.mark.parametrize("name", list(LAWS))
 def test_gradients_equal_central_differences_of_forward_runs(name):
     """jax.grad through the checkpointed scan (forward mode for these few gains) against (J(θ + h) − J(θ − h)) / 2h of

@@ -16,8 +16,8 @@ with a delay line (the repetitive law, (7.2.32)) carries it in the scan's carry 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
 from collections.abc import Callable
+from dataclasses import dataclass, replace
 from typing import Any
 
 from ..grid import Grid, steps
