@@ -4,6 +4,7 @@ plain Python RK4 loop of Example 6.3.1 (bench_single_run.py) timed in this same 
 * `ra.load("example-6.3.1").run()` in steady state (default backend: C), median of 21, and within it the time spent in
   the C programs (the loop and the records, timed around each native call): the rest is Python around them;
 * a fresh `robotadapt run example-6.3.1` with its three figures, the programs on disk (warm cache), median of 5;
+  fresh processes start as an installed package does, with Python's bytecode cache (bench_single_run.INSTALLED);
 * `robotadapt sweep example-6.3.1 --random controller.Kv=5:20 --n N` end to end (continuous, and sampled at Ts = 2 ms):
   N plain-loop runs against the sweep's wall time, with the peak resident memory of its largest process;
 * panda-slotine-li, 10 s at 1 kHz: steady (C) and a fresh process with its program on disk, against the plain
@@ -25,7 +26,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from bench_single_run import import_seconds_of, naive_rk4, timed
+from bench_single_run import INSTALLED, fresh_cli_seconds, import_seconds_of, naive_rk4, timed
 
 import robotadapt as ra
 from robotadapt.native import build
@@ -68,7 +69,8 @@ def sweep(runs: int, extra: tuple[str, ...]) -> tuple[float, float]:
         parent = ("import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, capture_output=True); "
                   "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
         t0 = time.perf_counter()
-        done = subprocess.run([sys.executable, "-c", parent, *command], check=True, capture_output=True, text=True)
+        done = subprocess.run([sys.executable, "-c", parent, *command], check=True, capture_output=True, text=True,
+                              env=INSTALLED)
         seconds = time.perf_counter() - t0
     return seconds, int(done.stdout.split()[-1]) / 1024
 
@@ -90,10 +92,7 @@ def main() -> None:
     rows.append(('ra.load("example-6.3.1").run(), steady', wall, loop / wall, "≥ 500x"))
     rows.append(("  of which in the C programs (loop, records)", native, loop / native,
                  f"the run is {wall / native:.2f}x it (goal ≤ 2x)"))
-    with tempfile.TemporaryDirectory() as out:
-        command = [*CLI, "run", "example-6.3.1", "--out", out]
-        subprocess.run(command, check=True, capture_output=True)  # its programs on disk
-        cli = import_seconds_of(command, 5)
+    cli = fresh_cli_seconds(5)
     rows.append(("fresh `robotadapt run example-6.3.1`, figures, warm", cli, loop / cli, "≤ 1.0x slower (≥ 1.0x)"))
     peaks = []
     for extra, what in (((), "continuous"), (("--control-period", "0.002"), "Ts = 2 ms")):

@@ -13,6 +13,7 @@ cost of importing the library in a fresh interpreter.
 
 from __future__ import annotations
 
+import os
 import statistics
 import subprocess
 import sys
@@ -98,14 +99,13 @@ def robotadapt_c() -> np.ndarray:
 def first_run_seconds(backend: str) -> tuple[float, float]:
     """Wall time of a fresh process's first compiled run on `backend` (import, tracing, compilation, run), with an empty
     cache and then with the programs the first process left on disk (C: found without tracing, JAX not imported)."""
-    import os
     import tempfile
 
     script = (f"import time; t0 = time.perf_counter(); from bench_single_run import robotadapt_simulate; "
               f"robotadapt_simulate({backend!r}); print(time.perf_counter() - t0)")
     out = []
     with tempfile.TemporaryDirectory() as cache:
-        env = dict(os.environ, ROBOTADAPT_CACHE=cache)
+        env = dict(INSTALLED, ROBOTADAPT_CACHE=cache)
         for _ in range(2):
             done = subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True, env=env,
                                   cwd=os.path.dirname(os.path.abspath(__file__)))
@@ -119,9 +119,7 @@ def fresh_cli_seconds(repeats: int = 3) -> float:
     import tempfile
 
     with tempfile.TemporaryDirectory() as out:
-        command = [sys.executable, "-m", "robotadapt", "run", "example-6.3.1", "--out", out]
-        subprocess.run(command, check=True, capture_output=True)
-        return import_seconds_of(command, repeats)
+        return import_seconds_of([sys.executable, "-m", "robotadapt", "run", "example-6.3.1", "--out", out], repeats)
 
 
 def robotadapt_batch_of_one() -> np.ndarray:
@@ -140,14 +138,21 @@ def timed(fn: Callable[[], np.ndarray], repeats: int) -> tuple[float, np.ndarray
     return statistics.median(times), out
 
 
+#: a fresh process's environment as an installed package starts: with Python's bytecode cache. This machine's shell sets
+#: PYTHONDONTWRITEBYTECODE=1, under which every start compiles the package's 120 modules from source again (about
+#: 0.2 s of `import robotadapt.sim`, cProfile) — which an installed copy, compiled by pip at install, never does
+INSTALLED = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+
+
 def import_seconds_of(command: list[str], repeats: int) -> float:
-    """Median wall time of a fresh process running `command`."""
+    """Median wall time of a fresh process running `command` (in :data:`INSTALLED`), after one untimed start (which
+    leaves the bytecode cache and any program the command builds on disk)."""
     times = []
-    for _ in range(repeats):
+    for _ in range(repeats + 1):
         t0 = time.perf_counter()
-        subprocess.run(command, check=True, capture_output=True)
+        subprocess.run(command, check=True, capture_output=True, env=INSTALLED)
         times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return statistics.median(times[1:])
 
 
 def import_seconds(statement: str, repeats: int = 5) -> float:
