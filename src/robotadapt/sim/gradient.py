@@ -121,8 +121,8 @@ class Rollout:
     def scores(self, loop: ClosedLoop, z0: Array, max_state: float) -> tuple[Array, Array, Array, Array]:
         """(t, e, τ, ok) at the logged instants: e and τ as :meth:`signals` gives them (each step's sample, as the
         running metrics take it), and whether every logged state stayed finite and within `max_state`, without
-        logging the states: the composite law's on the Panda holds 4984 numbers (P is 70 × 70), so a batched screen of
-        64 runs over 2000 steps would keep 5 GB of them."""
+        logging the states: the composite law's on the Panda holds 5481 numbers (P is 70 × 70), so a batched screen of
+        64 runs over 2000 steps would keep 5.6 GB of them."""
         jnp = jax_module().numpy
 
         def keep(record: Any) -> tuple[Array, Array, Array]:
