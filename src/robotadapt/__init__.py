@@ -17,10 +17,7 @@ name: `ra.InertiaRelated`, `ra.Gradient`, ...; the first such name imports the c
 from __future__ import annotations
 
 from importlib import import_module
-from importlib.metadata import version
 from typing import Any
-
-__version__ = version("robotadapt")
 
 #: module (relative to the package) → the names the front door takes from it, besides the laws (module docstring)
 EXPORTS = {
@@ -54,6 +51,8 @@ def __getattr__(name: str) -> Any:
     module = _WHERE.get(name)
     if module is not None:
         value = getattr(import_module(f"{__name__}.{module}"), name)
+    elif name == "__version__":  # the installed metadata, read when asked: 45 ms of every start otherwise
+        value = import_module("importlib.metadata").version(__name__)
     elif name == "__all__":
         return ["__version__", *_WHERE, *_laws()]
     elif name.startswith("_") or name not in (laws := _laws()):
@@ -67,4 +66,4 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE) | set(_laws()))
+    return sorted(set(globals()) | {"__version__"} | set(_WHERE) | set(_laws()))

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import importlib.metadata
 import sys
 from types import ModuleType
+from typing import Any
 
 from ..validation import ConfigError
 
@@ -20,7 +20,17 @@ COMMANDS = ("list", "run", "gains", "pe", "excite", "identify", "export", "figur
 
 def version() -> str:
     """The installed package's version (its metadata, from pyproject.toml: no copy of the number here)."""
-    return importlib.metadata.version("robotadapt")
+    from importlib.metadata import version as installed
+
+    return installed("robotadapt")
+
+
+class _Version(argparse.Action):
+    """`--version`: the version printed, read from the metadata only then (a lookup costs every start 45 ms)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any) -> None:
+        print(f"{parser.prog} {version()}")
+        parser.exit()
 
 
 def _modules() -> dict[str, ModuleType]:
@@ -38,8 +48,7 @@ def _parser(modules: dict[str, ModuleType]) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="robotadapt", description="Adaptive control of rigid robot manipulators.",
                                 epilog="Start with `robotadapt list`, then `robotadapt run example-6.3.1`; "
                                 "`robotadapt COMMAND --help` for a command's options.")
-    p.add_argument("--version", action="version", version=f"%(prog)s {version()}",
-                   help="print the installed version and exit")
+    p.add_argument("--version", action=_Version, nargs=0, help="print the installed version and exit")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for module in modules.values():
         module.add_parser(sub)

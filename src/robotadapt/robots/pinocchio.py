@@ -28,7 +28,6 @@ between processes, not between threads.
 
 from __future__ import annotations
 
-import importlib.metadata
 from dataclasses import dataclass, replace
 from functools import cached_property
 from os import PathLike
@@ -72,6 +71,8 @@ def example_urdf(name: Any) -> tuple[Path, tuple[str, ...]]:
     """The URDF file of the example-robot-data arm `name` (`EXAMPLES`, installed offline) and its gripper joints."""
     if not isinstance(name, str) or name not in EXAMPLES:
         raise ConfigError("robot.name", f"unknown example robot {name!r}; known: {', '.join(EXAMPLES)}")
+    import importlib.metadata  # here: 20 ms of every start otherwise
+
     try:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
