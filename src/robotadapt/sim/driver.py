@@ -337,13 +337,13 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
     (Example 6.3.1: 5.7 ms a run against 3.5 ms)."""
     jnp = np if native else jax_module().numpy  # the C program takes host arrays as they are
     each = native and mapped is not None
-    if mapped is not None:
-        key = pytree.key(runs[0])
-        for other in runs[1:]:
-            if pytree.key(other) != key:
-                raise ConfigError("simulation", "the runs differ in more than their arrays (a law's kind, a flag, a "
-                                  "scalar setting); one batch of sampled-data runs varies gains, tables and true "
-                                  "parameters only")
+    flat = [pytree.flatten(r) for r in runs] if mapped is not None else []  # each run's (leaves, structure), once
+    if flat:
+        key = flat[0][1]
+        if any(other != key for _, other in flat[1:]):
+            raise ConfigError("simulation", "the runs differ in more than their arrays (a law's kind, a flag, a "
+                              "scalar setting); one batch of sampled-data runs varies gains, tables and true "
+                              "parameters only")
     shape: tuple[int, ...] = (len(runs),) if mapped is not None else _runs_shape(carry)
     one = transition if mapped is None else runs[0]
     blocks = n // log_every + 1  # a block per logged step; the last one runs on to n and is padded
@@ -364,12 +364,10 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
         return _Lane(one, arrays, (key, log_every, axes) if native else None, axes, state, folded, [], [])
 
     if each:
-        lanes = []
-        for i, r in enumerate(runs):
-            leaves, key = pytree.flatten(r)
-            lanes.append(lane(r, leaves, key, map_tree(lambda a: a[i], carry), (), None))  # noqa: B023
+        lanes = [lane(r, leaves, key, map_tree(lambda a: a[i], carry), (), None)  # noqa: B023
+                 for i, (r, (leaves, key)) in enumerate(zip(runs, flat, strict=True))]
     elif mapped is not None:
-        arrays = [jnp.asarray(np.stack(parts)) for parts in zip(*(pytree.leaves(r) for r in runs), strict=True)]
+        arrays = [jnp.asarray(np.stack(parts)) for parts in zip(*(leaves for leaves, _ in flat), strict=True)]
         lanes = [lane(one, arrays, key, carry, shape, _axes(mapped))]
     else:
         leaves, key = pytree.flatten(transition)
