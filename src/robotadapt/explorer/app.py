@@ -252,8 +252,12 @@ class Page:
         """Show `view`: its URL now, its run when it ends (unless a newer change came first)."""
         self.notice = "" if view != self.view else self.notice
         self.view = view
-        self.state.data = {"url": [view.query()], "run": self.state.data["run"]}
+        self._url()
         self.runner.submit(partial(prepare, self.catalogue, view))
+
+    def _url(self) -> None:
+        """The page's URL: the view's (the run mark kept)."""
+        self.state.data = {"url": [self.view.query()], "run": self.state.data["run"]}
 
     def _scenario(self, attr: str, old: Any, new: str) -> None:
         if new != self.view.scenario:
@@ -286,13 +290,13 @@ class Page:
 
     def _fonts(self, attr: str, old: Any, new: bool) -> None:
         self.view = replace(self.view, large=new)
-        self.state.data = {"url": [self.view.query()], "run": self.state.data["run"]}
+        self._url()
         self._style()
         self._draw()
 
     def _shown(self, attr: str, old: Any, new: list[int]) -> None:
         self.view = replace(self.view, hidden=tuple(n for i, n in enumerate(FIGURES) if i not in new))
-        self.state.data = {"url": [self.view.query()], "run": self.state.data["run"]}
+        self._url()
         self._place()
 
     def _fit(self) -> None:

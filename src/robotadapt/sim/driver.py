@@ -365,7 +365,7 @@ def _compiled(runs: Sequence[Any], transition: Any, carry: Any, feed: Feed, n: i
 
     if each:
         lanes = [lane(r, leaves, key, map_tree(lambda a: a[i], carry), (), None)  # noqa: B023
-                 for i, (r, (leaves, key)) in enumerate(zip(runs, flat, strict=True))]
+                 for i, (r, (leaves, _)) in enumerate(zip(runs, flat, strict=True))]
     elif mapped is not None:
         arrays = [jnp.asarray(np.stack(parts)) for parts in zip(*(leaves for leaves, _ in flat), strict=True)]
         lanes = [lane(one, arrays, key, carry, shape, _axes(mapped))]
