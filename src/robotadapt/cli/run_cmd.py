@@ -64,8 +64,10 @@ def main(args: argparse.Namespace) -> int:
     save_result(result, out, scenario.text, model=model)
     if not args.no_plots:
         from ..report.figures import save_figures
+        from ..report.forked import usable_cores
 
-        save_figures(result, out, title=scenario.name, model=scenario.setup.controller.model, output=output)
+        save_figures(result, out, title=scenario.name, model=scenario.setup.controller.model, output=output,
+                     cores=usable_cores())
         if isinstance(scenario.setup.plant, MujocoPlant):
             from ..report.mujoco import option_estimates
 

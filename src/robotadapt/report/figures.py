@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,6 +26,7 @@ import numpy as np
 
 from ..files import writable_dir
 from ..studies.compare import number_text
+from .forked import spread
 from .output import DEFAULT_DPI, PNG, FigureFormat, new_figure, save_figure
 
 if TYPE_CHECKING:
@@ -382,18 +384,25 @@ RUN_FIGURES = ("tracking_error", "parameters", "torques")
 
 
 def save_figures(res: SimulationResult, directory: str | os.PathLike[str], title: str = "",
-                 model: Any = None, output: FigureFormat = PNG) -> list[Path]:
+                 model: Any = None, output: FigureFormat = PNG, cores: int = 1) -> list[Path]:
     """Write `tracking_error.png`, `parameters.png` and `torques.png` (the suffix `output`'s format) into `directory`,
     and for a task-space law's run `path.png` (and `kinematics.png` for the adaptive Jacobian's θ̂_k); `model` (the
-    controller's) gives the units (joint types, parameter units), else the axes say "rad or m"."""
+    controller's) gives the units (joint types, parameter units), else the axes say "rad or m". `cores` > 1: drawn by
+    that many processes at once where forking is safe (:mod:`robotadapt.report.forked`; `robotadapt run` does)."""
     directory = writable_dir(directory)
-    written = [write(res, directory / output.name(stem), title, model, output)
-               for stem, write in zip(RUN_FIGURES, (tracking_error, parameters, torques), strict=True)]
+    drawn: list[tuple[str, Callable[[], Figure]]] = [  # the heaviest first: this process draws it
+        ("tracking_error", lambda: tracking_error_figure(res, title, model)),
+        ("parameters", lambda: parameters_figure(res, title, model)),
+        ("torques", lambda: torques_figure(res, title, model))]
     if res.space == "task":  # the hand's path, and the kinematic estimate of a law that has one
-        written.append(save_figure(path_figure(res, title), directory / output.name("path"), output))
+        drawn.append(("path", lambda: path_figure(res, title)))
         if "theta_hat" in res.monitors:
-            written.append(save_figure(kinematics_figure(res, title), directory / output.name("kinematics"), output))
-    return written
+            drawn.append(("kinematics", lambda: kinematics_figure(res, title)))
+    return spread([partial(_save, figure, directory / output.name(stem), output) for stem, figure in drawn], cores)
+
+
+def _save(figure: Callable[[], Figure], path: Path, output: FigureFormat) -> Path:
+    return save_figure(figure(), path, output)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
