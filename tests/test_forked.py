@@ -93,3 +93,24 @@ def test_figures_drawn_by_two_processes_equal_those_drawn_by_one(tmp_path):
         print([p.name for p in one] == [p.name for p in two], [p.read_bytes() == q.read_bytes() for p, q in zip(one, two)])
     """)
     assert out == "True [True, True, True]"
+
+
+def test_a_silent_forked_process_is_stopped_and_its_jobs_run_here():
+    out = _fresh("""
+        import os, time, warnings
+        import robotadapt.report.forked as forked
+        forked.PATIENCE = 0.5
+        parent = os.getpid()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            print(forked.spread([lambda: "mine", lambda: os.getpid() == parent or time.sleep(1000)], cores=2))
+        print([str(w.message) for w in caught])
+        try:
+            os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            print("every child reaped")
+    """)
+    results, caught, reaped = out.splitlines()
+    assert results == "['mine', True]"
+    assert "gave no result in 0.5 s and was stopped" in caught
+    assert reaped == "every child reaped"

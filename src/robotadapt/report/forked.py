@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import os
 import pickle
+import select
+import signal
 import sys
 import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 T = TypeVar("T")
+PATIENCE = 120.0  # s a forked process may stay silent once this one's jobs are done (a figure takes under one)
 
 
 def usable_cores() -> int:
@@ -50,7 +53,8 @@ def spread(jobs: Sequence[Callable[[], T]], cores: int = 1) -> list[T]:
         mine: tuple[str, Any] = ("ok", [jobs[i]() for i in parts[0]])
     except BaseException as failed:  # noqa: BLE001 - raised below, once every child is reaped
         mine = ("error", failed)
-    outcomes = [mine, *(_collect(pid, fd) for pid, fd in children)]
+    outcomes = [mine, *(_collect(pid, fd, [jobs[i] for i in part])
+                        for (pid, fd), part in zip(children, parts[1:], strict=True))]
     for kind, value in outcomes:
         if kind == "error":
             raise value
@@ -85,10 +89,25 @@ def _fork(jobs: list[Callable[[], Any]]) -> tuple[int, int]:
         os._exit(code)  # no atexit handler, no flush of the parent's buffers, no return into the parent's code
 
 
-def _collect(pid: int, fd: int) -> tuple[str, Any]:
-    """The child's outcome, read whole, once it ended."""
-    with os.fdopen(fd, "rb") as pipe:
-        payload = pipe.read()
+def _collect(pid: int, fd: int, jobs: list[Callable[[], Any]]) -> tuple[str, Any]:
+    """The child's outcome, read whole, once it ended; a child silent for `PATIENCE` s (a fork that deadlocked) is
+    killed and its `jobs` run here instead, with a warning."""
+    payload = b""
+    with os.fdopen(fd, "rb", buffering=0) as pipe:
+        while select.select([pipe], [], [], PATIENCE)[0]:
+            chunk = pipe.read(1 << 16)
+            if not chunk:
+                break
+            payload += chunk
+        else:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            warnings.warn(f"a forked process gave no result in {PATIENCE:g} s and was stopped; its jobs ran here instead",
+                          RuntimeWarning, stacklevel=3)
+            try:
+                return "ok", [job() for job in jobs]
+            except BaseException as failed:  # noqa: BLE001 - raised by the caller, once every child is reaped
+                return "error", failed
     _, status = os.waitpid(pid, 0)
     if not payload:
         return "error", RuntimeError(f"a forked process drawing figures ended without a result ({_ended(status)})")
