@@ -116,6 +116,8 @@ def _assemble(loop: ClosedLoop, z: Array, maps: dict[str, Array | None], logged:
     if carried is not None:
         passivity, extras["passivity_running_min"] = carried
     extras.update(plant.extra_series(z[..., : loop.m]))
+    if truth is not None and maps.get("V_phi") is not None:
+        extras["parameter_lyapunov"] = maps["V_phi"]
     return {"q": q, "dq": dq, "x": x, "q_des": maps["q_des"], "dq_des": maps["dq_des"], "ddq_des": maps["ddq_des"],
             "tau": tau, "V": maps.get("V"), "r": maps.get("r"), "phi_hat": phi_hat, "passivity": passivity, "truth": truth,
             "errors": maps.get("errors")}
@@ -146,7 +148,7 @@ def _maps(loop: ClosedLoop, flags: tuple[bool], times: Array, z: Array, ref: Ref
     as the torque uses it, V and r."""
     ctrl, plant = loop.controller, loop.plant
     q, dq, x = loop.split(z)
-    out: dict[str, Array | None] = {"commanded": None, "tau": None, "V": None, "r": None}
+    out: dict[str, Array | None] = {"commanded": None, "tau": None, "V": None, "r": None, "V_phi": None}
     if flags[0]:
         out["commanded"] = loop.torque(times, z, ref)
         out["tau"] = plant.saturate(out["commanded"])
@@ -156,6 +158,8 @@ def _maps(loop: ClosedLoop, flags: tuple[bool], times: Array, z: Array, ref: Ref
     if truth is not None:
         out["V"] = ctrl.lyapunov(times, x, q, dq, ref, truth)
     out["r"] = ctrl.filtered_error(times, x, q, dq, ref)
+    if loop.w and out["V"] is not None and out["r"] is not None:  # V_φ, for the passivity monitor (controller_series)
+        out["V_phi"] = parameter_part(ctrl.model, q, out["r"], out["V"], truth)
     if ctrl.has("tracking_error"):  # a task-space law: e = x_d − x(q), not q_des − q
         out["errors"] = array_namespace(q).stack(ctrl.tracking_error(q, dq, ref), axis=-2)
     return out
@@ -173,10 +177,17 @@ def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | 
     result = SimulationResult(t=t, **signals, phi=phi,  # type: ignore[arg-type]
                               param_names=ctrl.model.param_names if phi_hat.shape[-1] else (),
                               state_names=ctrl.state_names, status=status, wall_time=wall, info=info, running=folded)
-    return replace(result, monitors={**controller_series(result, ctrl, extras.get("phi_true")), **extras})
+    series = controller_series(result, ctrl, extras.get("phi_true"), extras.get("parameter_lyapunov"))
+    return replace(result, monitors={**series, **extras})
 
 
-def controller_series(res: SimulationResult, controller: Any, phi_t: Array | None = None) -> dict[str, Array]:
+def parameter_part(model: Any, q: Array, r: Array, V: Array, phi: Array) -> Array:
+    """V_φ = V − ½ rᵀ M(q, φ) r, the parameter part of V (:func:`controller_series`)."""
+    return V - 0.5 * (r * matvec(model.mass_matrix(q, phi), r)).sum(axis=-1)
+
+
+def controller_series(res: SimulationResult, controller: Any, phi_t: Array | None = None,
+                      V_phi: Array | None = None) -> dict[str, Array]:
     """Signals of the run that need its controller, at the logged instants:
 
     - `parameter_lyapunov`: V_φ(t) = V(t) − ½ rᵀ M(q) r, the parameter part of V (½ φ̃ᵀ Γ⁻¹ φ̃ in (6.3.7) and (6.4.8),
@@ -189,20 +200,19 @@ def controller_series(res: SimulationResult, controller: Any, phi_t: Array | Non
     then taken at each instant, as V was, so that V_φ and β = V_φ(0) are those of the arm as it was then. The bound
     (6.4.4) is for a constant φ: where φ jumps, V_φ jumps with it (φ̂ does not), and ∫₀ᵗ −rᵀZφ̃ ≥ −V_φ(0) − Σ ΔV_φ.
     `parameter_lyapunov_jump` holds ΔV_φ = V_φ(φ after) − V_φ(φ before) at the first logged instant after each change
-    (both with that instant's state), 0 elsewhere.
+    (both with that instant's state), 0 elsewhere. `V_phi`: V_φ as the record's maps computed it (:func:`_maps`, in C
+    for a run of the C backend), else computed here.
     """
     out: dict[str, Array] = {}
     if res.passivity is not None and res.V is not None and res.r is not None and res.phi is not None:
-        def parameter_part(V: Array, phi: Array) -> Array:
-            return V - 0.5 * (res.r * matvec(controller.model.mass_matrix(res.q, phi), res.r)).sum(axis=-1)
-
-        out["parameter_lyapunov"] = parameter_part(res.V, res.phi if phi_t is None else phi_t)
+        out["parameter_lyapunov"] = V_phi if V_phi is not None else parameter_part(
+            controller.model, res.q, res.r, res.V, res.phi if phi_t is None else phi_t)
         if phi_t is not None:
             before = np.concatenate([phi_t[:1], phi_t[:-1]])
             ref = Reference(res.q_des, res.dq_des, res.ddq_des)
             V_before = controller.lyapunov(res.t, res.x, res.q, res.dq, ref, before)
             changed = np.any(before != phi_t, axis=-1)
-            out["parameter_lyapunov_jump"] = np.where(changed, out["parameter_lyapunov"]
-                                                      - parameter_part(V_before, before), 0.0)
+            out["parameter_lyapunov_jump"] = np.where(changed, out["parameter_lyapunov"] - parameter_part(
+                controller.model, res.q, res.r, V_before, before), 0.0)
     out.update(controller.monitors(res.x, res.q))  # the law's own (least squares: λ_min(P⁻¹); the hand's σ_min(J))
     return out
