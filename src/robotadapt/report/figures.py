@@ -319,24 +319,6 @@ def parameters_figure(res: SimulationResult, title: str = "", model: Any = None)
     return finish(fig, axes, titled(title, f"parameter {what}"))
 
 
-def tracking_error(res: SimulationResult, path: Path, title: str = "", model: Any = None,
-                   output: FigureFormat = PNG) -> Path:
-    """Write :func:`tracking_error_figure` to `path` in `output`'s format."""
-    return save_figure(tracking_error_figure(res, title, model), path, output)
-
-
-def parameters(res: SimulationResult, path: Path, title: str = "", model: Any = None,
-               output: FigureFormat = PNG) -> Path:
-    """Write :func:`parameters_figure` to `path` in `output`'s format."""
-    return save_figure(parameters_figure(res, title, model), path, output)
-
-
-def torques(res: SimulationResult, path: Path, title: str = "", model: Any = None,
-            output: FigureFormat = PNG) -> Path:
-    """Write :func:`torques_figure` to `path` in `output`'s format."""
-    return save_figure(torques_figure(res, title, model), path, output)
-
-
 # the hand of a task-space law's run (docs/task-space.md)
 
 VIEWS = {2: ((0, 1),), 3: ((0, 1), (0, 2), (1, 2))}  # the planes drawn: x–y; or the top, front and side views
