@@ -182,7 +182,8 @@ def _result(ctrl: Any, t: Array, signals: dict[str, Array | None], phi: Array | 
 
 
 def parameter_part(model: Any, q: Array, r: Array, V: Array, phi: Array) -> Array:
-    """V_φ = V − ½ rᵀ M(q, φ) r, the parameter part of V (:func:`controller_series`)."""
+    """V_φ = V − ½ rᵀ M(q, φ) r, the parameter part of V (½ φ̃ᵀ Γ⁻¹ φ̃ in (6.3.7) and (6.4.8), ½ φ̃ᵀ P⁻¹ φ̃ in (6.6.29)),
+    whose value at 0 bounds the passivity integral (6.4.4) (:func:`controller_series`)."""
     return V - 0.5 * (r * matvec(model.mass_matrix(q, phi), r)).sum(axis=-1)
 
 
