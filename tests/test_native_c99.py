@@ -170,6 +170,35 @@ def test_a_program_called_repeatedly_is_one_c_function():
     np.testing.assert_allclose(compiled(rk4, z, h)(z, h)[0], np.asarray(expected), rtol=1e-12, atol=1e-14)
 
 
+def test_a_long_loop_body_is_a_c_function_with_the_same_numbers(monkeypatch):
+    """A scan whose body holds at least BODY_FUNCTION_MIN equations calls the body as a C function of its own (gcc's
+    register allocation on one long loop body: the Panda's records took 24 s, 5 s so), with the carry and the slices
+    as the inlined loop computes them, bit for bit; a shorter body is inlined."""
+    from robotadapt.native import control
+
+    def fn(z0, xs):
+        def body(z, x):
+            z = jnp.tanh(jnp.outer(z, x) @ z) + jnp.sin(z * x.sum())
+            return z, (z * 2.0, jnp.cumsum(z))
+        return jax.lax.scan(body, z0, xs)
+
+    z0, xs = RNG.normal(size=3), RNG.normal(size=(5, 3))
+    inlined = _source(fn, z0, xs)
+    assert "static void f_f" not in inlined
+    monkeypatch.setattr(control, "BODY_FUNCTION_MIN", 3)
+    apart = _source(fn, z0, xs)
+    names = re.findall(r"static void (f_f\d+)\(", apart)
+    assert len(names) == 1 and apart.count(f"{names[0]}(") == 2  # defined, called in the loop
+    got = compiled(fn, z0, xs)(z0, xs)
+    monkeypatch.setattr(control, "BODY_FUNCTION_MIN", 10**9)
+    want = compiled(fn, z0, xs)(z0, xs)
+    with jax.enable_x64(True):
+        expected = jax.tree_util.tree_leaves(fn(jnp.asarray(z0), jnp.asarray(xs)))
+    for g, w, e in zip(got, want, expected, strict=True):
+        np.testing.assert_array_equal(g, w)
+        np.testing.assert_allclose(g, np.asarray(e), rtol=1e-12, atol=1e-14)
+
+
 def test_functions_inside_functions_have_their_own_names(monkeypatch):
     """A repeatedly called program that itself calls another repeatedly: two C functions, distinct names, JAX's
     result (the size threshold lowered so that small programs show it)."""

@@ -132,6 +132,20 @@ class Translator(Lowering):
                 env[var] = ref
         return [read(v) if used is None or used[k] else UNUSED for k, v in enumerate(jaxpr.outvars)]
 
+    def apart(self, closed: Any, ins: Sequence[Ref], outs: Sequence[Aval]) -> list[Ref]:
+        """A nested program's outputs from a call of its C function, defined once per program and operands' layout
+        (:func:`_function`); the outputs this translator's `used` marks, the others :data:`UNUSED`."""
+        key = (id(closed), tuple(self.used), tuple((r.shape, r.dtype, r.name if _inside(r) else None,
+                                                    None if r.zeros is None else r.zeros.tobytes()) for r in ins))
+        if key not in self.em.defined:
+            self.em.defined[key] = _function(self, closed, list(ins), list(outs))
+        name, kept = self.em.defined[key]
+        pointers = [_pointer(self, r) for r in ins if not _inside(r)]
+        results = [self.em.buffer(*outs[k]) for k in kept]
+        self.em.emit(f"{name}({', '.join(pointers + [r.name for r in results])});")
+        found = dict(zip(kept, results, strict=True))
+        return [found.get(k, UNUSED) for k in range(len(outs))]
+
     def equation(self, eqn: Any, ins: list[Ref]) -> list[Ref]:
         """The values of one equation's outputs: computed now (constants), held as elements (:mod:`.held`), else
         written by its primitive's expression or handler."""
@@ -164,16 +178,7 @@ def jit(t: Translator, ins: list[Ref], outs: list[Aval], jaxpr: Any, **_: Any) -
     translated once: a quarter of the text for gcc, the same arithmetic."""
     if t.em.calls.get(id(jaxpr), 0) < 2 or len(jaxpr.jaxpr.eqns) < FUNCTION_MIN:
         return t.call(jaxpr, ins, t.used)
-    key = (id(jaxpr), tuple(t.used), tuple((r.shape, r.dtype, r.name if _inside(r) else None,
-                                            None if r.zeros is None else r.zeros.tobytes()) for r in ins))
-    if key not in t.em.defined:
-        t.em.defined[key] = _function(t, jaxpr, ins, outs)
-    name, kept = t.em.defined[key]
-    pointers = [_pointer(t, r) for r in ins if not _inside(r)]
-    results = [t.em.buffer(*outs[k]) for k in kept]
-    t.em.emit(f"{name}({', '.join(pointers + [r.name for r in results])});")
-    found = dict(zip(kept, results, strict=True))
-    return [found.get(k, UNUSED) for k in range(len(outs))]
+    return t.apart(jaxpr, ins, outs)
 
 
 def _function(t: Translator, closed: Any, ins: list[Ref], outs: list[Aval]) -> tuple[str, list[int]]:

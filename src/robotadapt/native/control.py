@@ -8,8 +8,13 @@ from typing import Any
 
 import numpy as np
 
-from .lowering import Handler, Lowering
+from .lowering import Handler, Lowering, equations
 from .values import Aval, Ref
+
+#: a loop body of at least this many equations (nested ones included) is a C function of its own, called in the loop:
+#: gcc's register allocation grows faster than linearly on one long loop body (the Panda's records, 4 700 lines: 24 s
+#: inlined, 5 s as a function), the same arithmetic
+BODY_FUNCTION_MIN = 1000
 
 
 def assign(t: Lowering, targets: Sequence[Ref], values: Sequence[Ref]) -> None:
@@ -54,10 +59,18 @@ def scan(t: Lowering, ins: list[Ref], outs: list[Aval], jaxpr: Any, length: int,
     ys = [t.em.buffer(shape, dtype) for shape, dtype in outs[num_carry:]]
     it, at = t.em.fresh("t"), t.em.fresh("j")
 
+    apart = equations(jaxpr.jaxpr) >= BODY_FUNCTION_MIN
+    slice_avals = [(shape[1:], dtype) for shape, dtype in outs[num_carry:]]
+
     def fill() -> None:
         t.em.emit(f"const int64_t {at} = {f'{length - 1} - {it}' if reverse else it};")
         slices = [Ref(f"({x.name} + {at}*{max(int(np.prod(x.shape[1:])), 1)})", x.shape[1:], x.dtype) for x in xs]
-        new = t.call(jaxpr, [*consts, *carry, *slices])
+        body = [*consts, *carry, *slices]
+        if apart:
+            t.used = [True] * len(outs)  # the body's every output: the carry goes round, each y is written
+            new = t.apart(jaxpr, body, [*((r.shape, r.dtype) for r in carry), *slice_avals])
+        else:
+            new = t.call(jaxpr, body)
         for y, value in zip(ys, new[num_carry:], strict=True):  # before the carry moves: a y may alias it
             size = max(int(np.prod(y.shape[1:])), 1)
             t.copy_into(y, value, f"{at}*{size}", size)

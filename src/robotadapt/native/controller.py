@@ -22,6 +22,7 @@ from typing import Any
 
 from ..validation import ConfigError
 from .c99 import translate
+from .lowering import equations
 
 PREFIX = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,30}$")
 
@@ -50,19 +51,6 @@ def check_prefix(prefix: str) -> str:
         raise ConfigError("--prefix", f"expected a C identifier of at most 31 characters (letters, digits, _), got "
                           f"{prefix!r}")
     return prefix
-
-
-def count(jaxpr: Any) -> int:
-    """Equations of a jaxpr, those of nested programs included."""
-    total = 0
-    for eqn in jaxpr.eqns:
-        total += 1
-        for value in eqn.params.values():
-            for item in value if isinstance(value, list | tuple) else [value]:
-                inner = getattr(item, "jaxpr", item)
-                if hasattr(inner, "eqns"):
-                    total += count(inner)
-    return total
 
 
 def export(tick: Any, init: Any, n: int, prefix: str = "ra", what: str = "") -> Export:
@@ -102,7 +90,8 @@ void {prefix}_step(double *state, double t, const double *q, const double *dq, d
             f"    memcpy(in + 2, q, {n} * sizeof(double));", f"    memcpy(in + {2 + n}, dq, {n} * sizeof(double));",
             f"    {prefix}_tick_impl(state + 1, in, tau, state + 1);  /* the new state is written last */",
             "    state[0] += 1.0;", "}", ""]
-    return Export(prefix, n, size, header, "\n".join(body), harness(prefix, n), count(tick.jaxpr) + count(init.jaxpr))
+    return Export(prefix, n, size, header, "\n".join(body), harness(prefix, n),
+                  equations(tick.jaxpr) + equations(init.jaxpr))
 
 
 def harness(prefix: str, n: int) -> str:

@@ -20,6 +20,19 @@ from .values import Aval, Ref, broadcast, linear
 Handler = Callable[..., Ref | list[Ref]]
 
 
+def equations(jaxpr: Any) -> int:
+    """Equations of a jaxpr, those of nested programs included."""
+    total = 0
+    for eqn in jaxpr.eqns:
+        total += 1
+        for value in eqn.params.values():
+            for item in value if isinstance(value, list | tuple) else [value]:
+                inner = getattr(item, "jaxpr", item)
+                if hasattr(inner, "eqns"):
+                    total += equations(inner)
+    return total
+
+
 class Lowering(ABC):
     """Translates into statements of an :class:`Emitter`; `used`: which outputs of the equation being translated are
     read."""
@@ -38,6 +51,10 @@ class Lowering(ABC):
         jaxpr = getattr(closed, "jaxpr", closed)
         consts = getattr(closed, "consts", [])
         return type(self)(self.em).run(jaxpr, consts, ins, used)
+
+    @abstractmethod
+    def apart(self, closed: Any, ins: Sequence[Ref], outs: Sequence[Aval]) -> list[Ref]:
+        """The outputs of a nested program from a call of a C function of its own, translated once."""
 
     def elementwise(self, expr: Callable[[list[str]], str], ins: Sequence[Ref], out: Aval) -> Ref:
         """A new buffer of `out` whose element is `expr` of the operands' elements there (broadcast)."""

@@ -65,7 +65,7 @@ class Rollout:
                 return take_run(per_run(first, count), 0, mapped)
         else:
             h = integrator.dt
-            step = RK4Step(loop, h, float("inf"))
+            step = RK4Step(loop, h, float("inf"), rolled=True)
             inputs = step.feed(trajectory)
         n_steps = steps(t_final, h)
         per_block = max(1, math.isqrt(n_steps + 1))
