@@ -85,3 +85,42 @@ def test_a_rolled_step_names_the_first_stage_whose_guard_failed(failing):
     assert bool(got[1]) == all(guards)
     np.testing.assert_allclose(np.asarray(got[2]), stages[3 if failing is None else failing], rtol=1e-14)
     np.testing.assert_allclose(np.asarray(got[4]), 2.0 * rate(T0, z)[:2], rtol=1e-14)
+
+
+def _scans(jaxpr) -> list[int]:
+    """The lengths of the scans in a jaxpr, nested programs included."""
+    found = []
+    for eqn in jaxpr.eqns:
+        if eqn.primitive.name == "scan":
+            found.append(eqn.params["length"])
+        for value in eqn.params.values():
+            inner = getattr(value, "jaxpr", None)
+            if inner is not None and hasattr(inner, "eqns"):
+                found += _scans(inner)
+    return found
+
+
+def test_a_long_step_is_rolled_for_xla_only(monkeypatch):
+    """The compiled step of more than LEAN_MAX operations scans its four stages for XLA and keeps them written out for
+    the C translator (which calls the one function of the rates it has); a shorter step is not rolled. Both give the
+    unrolled step's numbers (the threshold lowered so that the two-link arm's step counts as long)."""
+    from robotadapt.sim import compiled
+    from robotadapt.sim.loop import RK4Step
+
+    loop = _loop()
+    step = RK4Step(loop, DT, 1e6, REF)
+    z = np.array([0.3, -0.2, 0.5, 0.1, 0.4, 1.9])
+    carry, inputs = step.start(z), step.feed(REF)(3, 1)
+    one = jax.tree_util.tree_map(lambda a: a[0], inputs)
+
+    def traced(native):
+        with jax.enable_x64(True):
+            fn = step.compiled(native)
+            return jax.make_jaxpr(fn)(carry, one).jaxpr, jax.jit(fn)(carry, one)[0][0]
+
+    short = traced(False)
+    monkeypatch.setattr(compiled, "LEAN_MAX", 10)
+    rolled, native = traced(False), traced(True)
+    assert _scans(short[0]) == [] and _scans(native[0]) == [] and _scans(rolled[0]) == [4]
+    np.testing.assert_allclose(np.asarray(rolled[1]), np.asarray(native[1]), rtol=1e-14)
+    np.testing.assert_allclose(np.asarray(rolled[1]), np.asarray(short[1]), rtol=1e-14)

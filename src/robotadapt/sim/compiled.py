@@ -143,20 +143,21 @@ SMALL = 8  # dot products and sums over at most this many terms are written out 
 LEAN_MAX = 3000  # ... in steps of at most this many operations (the two-link arm's RK4 step: 820; the PUMA 560's: 6080)
 
 
-def lean(fn: Callable[..., Any]) -> Callable[..., Any]:
+def lean(fn: Callable[..., Any], large: Callable[..., Any] | None = None) -> Callable[..., Any]:
     """`fn`, a pure function of JAX arrays (pytrees), with its short contractions written out: a dot product or a sum
     over at most `SMALL` terms becomes multiplies and adds, in order. XLA on the CPU runs every dot and every reduction
     as a kernel of its own, a few tens of nanoseconds each, and the two-link arm's RK4 step has some fifty of them for
     a few hundred flops; written out, they fuse with the arithmetic around them (Example 6.3.1: 2.6 → 1.7 µs a step).
     The same numbers up to the order of the additions. Longer contractions (an n-DOF regressor times φ̂) are kept, and
-    a step of more than `LEAN_MAX` operations is left as it is: its time goes to arithmetic, and writing its sums out
-    would only lengthen its compilation (the PUMA 560's by half)."""
+    a step of more than `LEAN_MAX` operations is left as it is, or `large` (the same step, written to compile faster) is
+    traced in its place: its time goes to arithmetic, and writing its sums out would only lengthen its compilation (the
+    PUMA 560's by half)."""
     jax = jax_module()
 
     def wrapped(*args: Any) -> Any:
         closed, shape = jax.make_jaxpr(fn, return_shape=True)(*args)
         if _size(closed.jaxpr) > LEAN_MAX:
-            return fn(*args)
+            return (large or fn)(*args)
         out = _evaluate(closed.jaxpr, closed.consts, jax.tree_util.tree_leaves(args), SMALL)
         return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(shape), out)
 

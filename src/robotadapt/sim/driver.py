@@ -65,8 +65,9 @@ class Transition(Protocol):
     def __call__(self, carry: Any, inputs: Any) -> tuple[Any, Any, Verdict]:
         """(carry_{k+1}, record_k, verdict_k)."""
 
-    def compiled(self) -> Callable[[Any, Any], tuple[Any, Any, Verdict]]:
-        """The transition as a compiled program calls it (traced; e.g. the dynamics as a function of their own)."""
+    def compiled(self, native: bool = False) -> Callable[[Any, Any], tuple[Any, Any, Verdict]]:
+        """The transition as a compiled program calls it (traced; e.g. the dynamics as a function of their own), for
+        XLA or, `native`, for the C translator."""
 
     def blanks(self, carry: Any) -> tuple[Any, Any]:
         """Zeros shaped like a step's record and like its verdict's `bad` (None without a guard), from the carry."""
@@ -217,7 +218,7 @@ def _scan_program(structure: Any, mapped: Any, native: bool) -> Callable[..., An
             the rows folded in the loop (the state's last part, :func:`robotadapt.sim.running.fold_step`), none
             returned."""
             traced = pytree.unflatten(structure, arrays)  # its cached constants computed from the traced leaves
-            step = traced.compiled()
+            step = traced.compiled(native)
 
             def one(state: Any, inputs: Any) -> tuple[Any, Any]:
                 (carry, alive, k_stop, why, bad), acc = state[:5], state[5:]

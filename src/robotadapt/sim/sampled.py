@@ -151,9 +151,9 @@ class Tick(Module):
         x_bad = array_namespace(mid.x).where(sample.ok, x_bad, mid.x)
         return new, self.record(mid, sample, inputs[2]), Verdict(sample.ok, why, (sample.q_m, x_bad))
 
-    def compiled(self) -> Callable[[Carry, Any], tuple[Carry, Record, Verdict]]:
+    def compiled(self, native: bool = False) -> Callable[[Carry, Any], tuple[Carry, Record, Verdict]]:
         """The tick with the plant's ds/dt as a function of its own: traced once, called by every RK4 stage of every
-        plant sub-step (an n-DOF arm's dynamics: thousands of operations)."""
+        plant sub-step (an n-DOF arm's dynamics: thousands of operations), for XLA and C alike."""
         return partial(self.__call__, dynamics=jax_module().jit(self.dynamics))
 
     def blanks(self, carry: Carry) -> tuple[Record, tuple[Array, Array] | None]:
