@@ -273,3 +273,22 @@ def test_a_tuned_row_over_the_budget_says_why_measured(tmp_path):
     assert match, row["note"]
     assert int(match[1]) <= 3 and float(match[2]) == pytest.approx(row["peak_torque"], rel=1e-3)
     assert match[3] in row["tuned_gains"]
+
+
+def test_the_laws_of_a_fair_comparison_tune_alike_on_worker_processes():
+    """`fair` tunes its laws on spawned processes, one a law: each law's tuned gains and search are those of its tuning
+    in this process, and a law refused there comes back as the ConfigError it raised (its field and reason)."""
+    from robotadapt.studies.compare import _tunings
+
+    base = load("example-6.3.1", ["simulation.t_final=0.3", 'simulation.backend="jax"'])
+    entries, _ = lineup(base, ["slotine_li", "repetitive"])
+    jobs = [(e.scenario.name, e.scenario.data, "rms_error", 150.0, 3) for e in entries]
+    here, apart = _tunings(jobs, 1), _tunings(jobs, 2)
+    (fields, (summary, theta)), (_, refused) = here
+    assert fields == ["controller.Lam", "controller.Kv", "controller.Gamma"] and isinstance(refused, ConfigError)
+    assert apart[0][0] == fields
+    np.testing.assert_allclose(apart[0][1][1], theta, rtol=1e-9)
+    assert apart[0][1][0]["differentiated_runs"] == summary["differentiated_runs"]
+    assert isinstance(apart[1][1], ConfigError)
+    assert (apart[1][1].field, apart[1][1].reason) == (refused.field, refused.reason) == (
+        "simulation.t_final", "0.3 s is within one period T = 6.283 s: the law learns nothing (û_d(t − T) = 0 throughout)")

@@ -22,6 +22,9 @@ class ConfigError(ValueError):
         self.reason = message
         super().__init__(f"{field}: {message}" if field else message)
 
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:  # pickled as what it was made of (from a worker process)
+        return type(self), (self.field, self.reason)
+
 
 def _show(value: Any) -> str:
     text = np.array2string(np.asarray(value), threshold=8) if isinstance(value, np.ndarray) else repr(value)

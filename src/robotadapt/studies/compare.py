@@ -462,40 +462,33 @@ def _over_budget(summary: dict[str, Any]) -> str:
 
 
 def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: float, max_runs: int,
-         progress: bool = False) -> tuple[list[Row], dict[str, str]]:
+         progress: bool = False, workers: int | None = None) -> tuple[list[Row], dict[str, str]]:
     """The fair comparison: every entry of :func:`lineup` with its own gains tuned (`tunable`) to the same `objective`
     under the same torque budget (:func:`robotadapt.studies.tune.tune`, at most `max_runs` runs each), then run as
     :func:`compare` runs it. A law that cannot be differentiated keeps the lineup's gains, and its row says why; each row
     holds `tuned_gains`, `within_budget`, `tune_runs` and `tune_converged` (the search ended by its own test, not by
-    `max_runs`)."""
-    from .gain_space import parse_objective
-    from .tune import closed_loop, tune
+    `max_runs`). The laws are tuned on `workers` processes at once (default: every core; their compilation is most of
+    the time), then run here one after the other, so that each row's µs/step is measured alone."""
+    from .gain_space import locate, parse_objective
+    from .tune import tuned_scenario
 
     goal = parse_objective(objective)
     entries, skipped = lineup(base, names)
+    jobs = [(e.scenario.name, e.scenario.data, objective, max_torque, max_runs) for e in entries]
     rows = []
-    for entry in entries:
-        try:
-            loop = closed_loop(entry.scenario)
-            period = getattr(loop.controller, "period", None)  # a learning law's (its delay line's)
-            if loop.controller.has("delay_line") and period is not None and entry.scenario.setup.t_final <= period:
-                raise ConfigError("simulation.t_final", f"{entry.scenario.setup.t_final:g} s is within one period T = "
-                                  f"{period:.4g} s: the law learns nothing (û_d(t − T) = 0 throughout)")
-            fields = tunable(entry.scenario)
-            if not fields:
-                raise ConfigError("controller", "no gain of this law can be tuned (a law lists them in its `tuned`)")
-            tuned = tune(entry.scenario, fields, objective, max_torque, max_runs=max_runs)
-        except ConfigError as exc:
-            note = "; ".join(filter(None, (entry.note, f"lineup gains: not tuned ({brief(exc)})")))
+    for entry, (fields, found) in zip(entries, _tunings(jobs, workers), strict=True):
+        if isinstance(found, ConfigError):
+            note = "; ".join(filter(None, (entry.note, f"lineup gains: not tuned ({brief(found)})")))
             row = _row(replace(entry, note=note), progress)
             row.metrics.update(tuned_gains=None, tune_runs=0, tune_converged=None)
         else:
-            summary = tuned.summary()
-            row = _row(replace(entry, scenario=tuned.scenario, source=f"{entry.source}; tuned: {', '.join(fields)}",
+            summary, theta = found
+            tuned = tuned_scenario(entry.scenario, [locate(entry.scenario, f) for f in fields], theta)
+            row = _row(replace(entry, scenario=tuned, source=f"{entry.source}; tuned: {', '.join(fields)}",
                                note="; ".join(filter(None, (entry.note, _over_budget(summary))))), progress)
             row.metrics.update(tuned_gains=summary["gains"], tune_runs=summary["runs"],
                                tune_differentiated_runs=summary["differentiated_runs"],
-                               tune_converged=tuned.search.converged)
+                               tune_converged=summary["search_converged"])
         row.metrics["within_budget"] = row.result.ok and row.metrics["peak_torque"] <= max_torque
         row.metrics["objective"] = goal.of_metrics(metrics(row.result))
         rows.append(row)
@@ -506,3 +499,43 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
                   if row.metrics.get("tune_differentiated_runs") is not None else "lineup gains")
                   + (", converged" if row.metrics["tune_converged"] else ""), flush=True)
     return rows, skipped
+
+
+Tuning = tuple[list[str], ConfigError | tuple[dict[str, Any], np.ndarray]]
+
+
+def _tunings(jobs: list[tuple[Any, ...]], workers: int | None) -> list[Tuning]:
+    """:func:`_tuning` of every job, on `workers` spawned processes (default: every core, at most one a job; 1: here)."""
+    from ..report.forked import usable_cores
+    from .sweep import worker_init
+
+    workers = min(usable_cores() if workers is None else workers, len(jobs))
+    if workers <= 1:
+        return [_tuning(job) for job in jobs]
+    import multiprocessing
+
+    # spawned, not forked (a fork of a process whose JAX threads run can deadlock); each worker's XLA on one thread
+    with multiprocessing.get_context("spawn").Pool(workers, initializer=worker_init) as pool:
+        return pool.map(_tuning, jobs, 1)
+
+
+def _tuning(job: tuple[Any, ...]) -> Tuning:
+    """One law of :func:`fair` tuned: (the tuned fields, (tune.json's summary, θ)), or the ConfigError why not."""
+    from .tune import closed_loop, tune
+
+    name, data, objective, max_torque, max_runs = job
+    scenario = Scenario(name, data, setup(copy.deepcopy(data)))
+    fields: list[str] = []
+    try:
+        loop = closed_loop(scenario)
+        period = getattr(loop.controller, "period", None)  # a learning law's (its delay line's)
+        if loop.controller.has("delay_line") and period is not None and scenario.setup.t_final <= period:
+            raise ConfigError("simulation.t_final", f"{scenario.setup.t_final:g} s is within one period T = "
+                              f"{period:.4g} s: the law learns nothing (û_d(t − T) = 0 throughout)")
+        fields = tunable(scenario)
+        if not fields:
+            raise ConfigError("controller", "no gain of this law can be tuned (a law lists them in its `tuned`)")
+        tuned = tune(scenario, fields, objective, max_torque, max_runs=max_runs)
+    except ConfigError as exc:
+        return fields, exc
+    return fields, (tuned.summary(), np.asarray(tuned.theta))

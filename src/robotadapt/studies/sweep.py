@@ -301,7 +301,7 @@ def check_metric(s: Setup, metric: str) -> None:
         raise ConfigError("--metric", f"unknown metric {metric!r}; this scenario's runs have {', '.join(names)}")
 
 
-def _worker_init() -> None:
+def worker_init() -> None:
     """A local worker: the parent handles Ctrl-C and terminates it; its compiled step runs on one thread, since every
     core already has a worker (XLA's own threads would contend with the other workers; a user's XLA_FLAGS wins)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -333,7 +333,7 @@ def _executor(workers: int, scheduler: str | None) -> Iterator[tuple[int, Callab
 
         # a Pool (not a ProcessPoolExecutor): leaving the block terminates the workers at once, also on Ctrl-C;
         # spawned, not forked: a fork of a process whose JAX (or BLAS) threads are running can deadlock
-        with multiprocessing.get_context("spawn").Pool(workers, initializer=_worker_init) as pool:
+        with multiprocessing.get_context("spawn").Pool(workers, initializer=worker_init) as pool:
             yield workers, lambda jobs: pool.imap_unordered(run_chunk, jobs)
 
 
