@@ -201,6 +201,14 @@ def test_fair_needs_a_budget(tmp_path):
     assert code == 2 and err.startswith("robotadapt: error: --max-torque")
 
 
+@pytest.mark.parametrize("args, says", [(["--workers", "2"], "--workers: applies to --fair (the laws tuned at once)"),
+                                        (["--fair", "--max-torque", "100", "--workers", "0"],
+                                         "--workers: must be at least 1, got 0")])
+def test_workers_are_the_fair_comparisons_and_at_least_one(tmp_path, args, says):
+    code, _, err = cli("compare", "example-6.3.1", *args, "--out", str(tmp_path))
+    assert code == 2 and err.strip() == f"robotadapt: error: {says}" and not any(tmp_path.iterdir())
+
+
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary: install Debian's `chromium` package "
                     "(apt-get install -y chromium) to render the report in a real browser")
 def test_fair_report_renders_in_headless_chromium(fair_comparison):

@@ -40,6 +40,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                          help="with --fair: the objective each law is tuned to (as for robotadapt tune; default rms_error)")
     compare.add_argument("--tune-runs", type=int, default=30, metavar="N",
                          help="with --fair: most differentiated runs per law (default 30)")
+    compare.add_argument("--workers", type=int, metavar="N",
+                         help="with --fair: laws tuned at once, each in a process of its own (default: one per core; "
+                              "1 tunes them in-process; the Panda's composite law's tuning peaks at about 4 GB)")
     compare.add_argument("--out", type=Path, help="output folder (default: results/NAME/compare, or compare-fair)")
     add_figure_arguments(compare)
 
@@ -61,6 +64,10 @@ def main(args: argparse.Namespace) -> int:
         raise ConfigError("--max-torque", "a fair comparison needs a torque budget: --fair --max-torque T")
     if not args.fair and args.max_torque is not None:
         raise ConfigError("--max-torque", "applies to --fair (tuning every law under the budget)")
+    if args.workers is not None and not args.fair:
+        raise ConfigError("--workers", "applies to --fair (the laws tuned at once)")
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError("--workers", f"must be at least 1, got {args.workers}")
     base = load(args.scenario, overrides(args))
     if args.variant:
         if args.fair or args.controllers is not None:
@@ -81,7 +88,8 @@ def main(args: argparse.Namespace) -> int:
     if args.fair:
         from ..studies.compare import fair
 
-        rows, skipped = fair(base, names, args.objective, args.max_torque, args.tune_runs, progress=True)
+        rows, skipped = fair(base, names, args.objective, args.max_torque, args.tune_runs, progress=True,
+                             workers=args.workers)
     else:
         rows, skipped = compare(base, names, progress=True)
     folder = "compare-fair" if args.fair else "compare"
