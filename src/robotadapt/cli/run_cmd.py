@@ -63,8 +63,8 @@ def main(args: argparse.Namespace) -> int:
     model = scenario.setup.controller.model
     save_result(result, out, scenario.text, model=model)
     if not args.no_plots:
+        from ..cores import usable_cores
         from ..report.figures import save_figures
-        from ..report.forked import usable_cores
 
         save_figures(result, out, title=scenario.name, model=scenario.setup.controller.model, output=output,
                      cores=usable_cores())

@@ -22,12 +22,6 @@ T = TypeVar("T")
 PATIENCE = 120.0  # s a forked process may stay silent once this one's jobs are done (a figure takes under one)
 
 
-def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the system tells it)."""
-    affinity = getattr(os, "sched_getaffinity", None)
-    return len(affinity(0)) if affinity is not None else os.cpu_count() or 1
-
-
 def forkable() -> bool:
     """Whether a fork of this process is safe: on Linux, before JAX is imported."""
     return sys.platform == "linux" and hasattr(os, "fork") and "jax" not in sys.modules

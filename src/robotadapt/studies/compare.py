@@ -506,7 +506,7 @@ Tuning = tuple[list[str], ConfigError | tuple[dict[str, Any], np.ndarray]]
 
 def _tunings(jobs: list[tuple[Any, ...]], workers: int | None) -> list[Tuning]:
     """:func:`_tuning` of every job, on `workers` spawned processes (default: every core, at most one a job; 1: here)."""
-    from ..report.forked import usable_cores
+    from ..cores import usable_cores
     from .sweep import worker_init
 
     workers = min(usable_cores() if workers is None else workers, len(jobs))

@@ -35,6 +35,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..analysis.metrics import metrics
+from ..cores import usable_cores
 from ..files import atomic_write, writable_dir
 from ..grid import Grid
 from ..sim.batch import NotBatchable, simulate_batch
@@ -369,7 +370,7 @@ def run_sweep(sweep: Sweep, out: str | os.PathLike[str], *, workers: int | None 
     pending = [p for p in sweep.points() if p.run not in done]
     wall = time.perf_counter()
     hows = set()
-    with _executor(workers or os.cpu_count() or 1, scheduler) as (slots, run):
+    with _executor(workers or usable_cores(), scheduler) as (slots, run):
         size = chunk_size(len(pending), slots, base)
         jobs = [(sweep.data, pending[i : i + size]) for i in range(0, len(pending), size)]
         quiet = not (progress and sys.stderr.isatty())  # progress bars on a terminal only
