@@ -221,8 +221,9 @@ def rk4_step(loop: ClosedLoop, t: Any, z: Array, dt: float, r0: Reference, rh: R
     all four stages and `z_bad` is the state of the first stage where it did not (else None, None).
 
     `rolled` (traced by JAX only): the four stages as one `lax.scan`, so the program holds the closed loop's dynamics
-    once instead of four times; the same operations on the same numbers, so the same step to the bit. XLA's
-    compilation of the Panda's differentiated run: 55 → 23 s (docs/performance.md)."""
+    once instead of four times; the same operations on the same numbers, which XLA may fuse otherwise: the same step
+    to round-off (the Panda's state over 2 s: 7e-15 apart). XLA's compilation of the Panda's differentiated run:
+    55 → 23 s (docs/performance.md)."""
     respond = loop.respond if respond is None else respond
     if rolled:
         return _rolled(loop, t, z, dt, (r0, rh, rh, r1), respond)
@@ -352,8 +353,8 @@ class RK4Step(Module):
         """The step with dz/dt as a function of its own (an n-DOF arm's dynamics are thousands of operations: traced
         and lowered once, not once per RK4 stage) and its short sums written out (:func:`robotadapt.sim.compiled.lean`).
         For XLA (not `native`), a step too long for that has its stages rolled (:func:`rk4_step`): XLA inlines the
-        function four times, and the Panda's first 2-s run took 6.3 s, rolled 4.2 s, the same numbers (the C program
-        calls the one function it has)."""
+        function four times, and the Panda's first 2-s run took 6.3 s, rolled 4.5 s, equal to round-off (the C
+        program calls the one function it has)."""
         from ..tracing import jax_module
         from .compiled import lean
 
