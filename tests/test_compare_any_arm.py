@@ -282,8 +282,8 @@ def test_the_laws_of_a_fair_comparison_tune_alike_on_worker_processes():
 
     base = load("example-6.3.1", ["simulation.t_final=0.3", 'simulation.backend="jax"'])
     entries, _ = lineup(base, ["slotine_li", "repetitive"])
-    jobs = [(e.scenario.name, e.scenario.data, "rms_error", 150.0, 3) for e in entries]
-    here, apart = _tunings(jobs, 1), _tunings(jobs, 2)
+    scenarios, budget = [e.scenario for e in entries], ("rms_error", 150.0, 3)
+    here, apart = _tunings(scenarios, budget, 1), _tunings(scenarios, budget, 2)
     (fields, (summary, theta)), (_, refused) = here
     assert fields == ["controller.Lam", "controller.Kv", "controller.Gamma"] and isinstance(refused, ConfigError)
     assert apart[0][0] == fields

@@ -168,3 +168,18 @@ def test_check_names_rejects_unknown_keys():
     with raises_naming("controller.Kd") as info:
         check_names(["Kv", "Kd"], ["Kv", "Lam", "Gamma"], "controller")
     assert "Gamma, Kv, Lam" in info.value.reason
+
+
+def test_a_config_error_of_any_kind_pickles_as_it_was():
+    """A ConfigError comes back from a worker process (a fair comparison's tuning) with its message, field, reason and
+    a subclass's own attributes, whatever its subclass's constructor takes."""
+    import pickle
+    from pathlib import Path
+
+    from robotadapt.native.patience import Building
+    from robotadapt.native.values import Unsupported
+
+    for error in (ConfigError("controller.Kv", "must be positive"), Unsupported("primitive 'foo'"),
+                  Building("simulation.backend", "being built", Path("/tmp/x.so"))):
+        back = pickle.loads(pickle.dumps(error))
+        assert type(back) is type(error) and str(back) == str(error) and vars(back) == vars(error)

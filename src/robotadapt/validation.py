@@ -22,8 +22,18 @@ class ConfigError(ValueError):
         self.reason = message
         super().__init__(f"{field}: {message}" if field else message)
 
-    def __reduce__(self) -> tuple[type, tuple[str, str]]:  # pickled as what it was made of (from a worker process)
-        return type(self), (self.field, self.reason)
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickled (from a worker process) as its class, message and attributes, restored without calling `__init__`:
+        a subclass's constructor takes other arguments (:class:`~robotadapt.native.patience.Building`'s path)."""
+        return _restored, (type(self), self.args, self.__dict__)
+
+
+def _restored(kind: type[ConfigError], args: tuple[Any, ...], state: dict[str, Any]) -> ConfigError:
+    """A pickled ConfigError (of any subclass) as it was: message, field, reason and the subclass's own attributes."""
+    error = kind.__new__(kind, *args)
+    error.args = args
+    error.__dict__.update(state)
+    return error
 
 
 def _show(value: Any) -> str:

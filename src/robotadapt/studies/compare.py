@@ -474,9 +474,9 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
 
     goal = parse_objective(objective)
     entries, skipped = lineup(base, names)
-    jobs = [(e.scenario.name, e.scenario.data, objective, max_torque, max_runs) for e in entries]
     rows = []
-    for entry, (fields, found) in zip(entries, _tunings(jobs, workers), strict=True):
+    tunings = _tunings([e.scenario for e in entries], (objective, max_torque, max_runs), workers)
+    for entry, (fields, found) in zip(entries, tunings, strict=True):
         if isinstance(found, ConfigError):
             note = "; ".join(filter(None, (entry.note, f"lineup gains: not tuned ({brief(found)})")))
             row = _row(replace(entry, note=note), progress)
@@ -504,27 +504,32 @@ def fair(base: Scenario, names: list[str] | None, objective: str, max_torque: fl
 Tuning = tuple[list[str], ConfigError | tuple[dict[str, Any], np.ndarray]]
 
 
-def _tunings(jobs: list[tuple[Any, ...]], workers: int | None) -> list[Tuning]:
-    """:func:`_tuning` of every job, on `workers` spawned processes (default: every core, at most one a job; 1: here)."""
+def _tunings(scenarios: list[Scenario], budget: tuple[str, float, int], workers: int | None) -> list[Tuning]:
+    """:func:`_tuning` of every scenario under `budget` (objective, max torque, max runs), on `workers` spawned processes
+    (default: every core, at most one a scenario; 1: here)."""
     from ..cores import usable_cores
     from .sweep import worker_init
 
-    workers = min(usable_cores() if workers is None else workers, len(jobs))
+    workers = min(usable_cores() if workers is None else workers, len(scenarios))
     if workers <= 1:
-        return [_tuning(job) for job in jobs]
+        return [_tuning(s, *budget) for s in scenarios]
     import multiprocessing
 
     # spawned, not forked (a fork of a process whose JAX threads run can deadlock); each worker's XLA on one thread
     with multiprocessing.get_context("spawn").Pool(workers, initializer=worker_init) as pool:
-        return pool.map(_tuning, jobs, 1)
+        return pool.map(_tuning_sent, [(s.name, s.data, *budget) for s in scenarios], 1)
 
 
-def _tuning(job: tuple[Any, ...]) -> Tuning:
+def _tuning_sent(job: tuple[Any, ...]) -> Tuning:
+    """:func:`_tuning` in a worker, its scenario built again from the data sent (name, data, then the budget)."""
+    name, data, *budget = job
+    return _tuning(Scenario(name, data, setup(copy.deepcopy(data))), *budget)
+
+
+def _tuning(scenario: Scenario, objective: str, max_torque: float, max_runs: int) -> Tuning:
     """One law of :func:`fair` tuned: (the tuned fields, (tune.json's summary, θ)), or the ConfigError why not."""
     from .tune import closed_loop, tune
 
-    name, data, objective, max_torque, max_runs = job
-    scenario = Scenario(name, data, setup(copy.deepcopy(data)))
     fields: list[str] = []
     try:
         loop = closed_loop(scenario)
